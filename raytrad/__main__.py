@@ -1,0 +1,4 @@
+from raytrad.cli import main
+import sys
+
+sys.exit(main())

@@ -1,0 +1,301 @@
+"""The Python API: from a scene file to written results in one call, or step by step.
+
+>>> from raytrad import api
+>>> outcome = api.render("scenes/cornell-box.obj", "out")          # doctest: +SKIP
+>>> outcome.result.radiosity.shape                                  # doctest: +SKIP
+(20184, 3)
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import logging
+import time
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from raytrad import __version__
+from raytrad.checkpoint import fingerprint, load_checkpoint, save_checkpoint
+from raytrad.display import display_colors
+from raytrad.errors import RaytradError, SettingsError
+from raytrad.formfactor import FormFactorEngine
+from raytrad.io.atomic import atomic_write
+from raytrad.io.loaders import load_scene
+from raytrad.io.ply import write_radiosity_ply
+from raytrad.mesh import MeshSettings, RadiosityMesh, build_mesh
+from raytrad.scene import Scene, has_emission
+from raytrad.solver import SolveResult, SolverState, SolveSettings, solve
+from raytrad.visibility import Occluder, nothing_can_occlude
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class RenderSettings:
+    """Everything ``raytrad render`` can be told.
+
+    Attributes
+    ----------
+    mesh : MeshSettings
+        Discretisation (receivers, patches, samples, seed).
+    solve : SolveSettings
+        Method and stopping rules.
+    scale : float
+        Multiplies scene coordinates to get metres (0.001 for a model in millimetres).
+    exposure : float
+        Extra exposure of the PLY display colours [EV].
+    cache_mb : float
+        Memory for cached form-factor columns [MiB].
+    checkpoint_seconds : float
+        Seconds between checkpoints of a long solve.
+    """
+
+    mesh: MeshSettings = field(default_factory=MeshSettings)
+    solve: SolveSettings = field(default_factory=SolveSettings)
+    scale: float = 1.0
+    exposure: float = 0.0
+    cache_mb: float = 1024.0
+    checkpoint_seconds: float = 60.0
+
+    def __post_init__(self) -> None:
+        if not (self.scale > 0 and np.isfinite(self.scale)):
+            raise SettingsError(f"scale must be a positive number, got {self.scale}")
+        m = self.mesh
+        if m.max_edge is not None and not m.max_edge > 0:
+            raise SettingsError(f"max edge must be positive, got {m.max_edge}")
+        if m.receivers < 1 or m.patches < 1 or m.samples < 1 or m.emitter_samples < 1:
+            raise SettingsError("receivers, patches and samples must be at least 1")
+        if m.patch_size is not None and not m.patch_size > 0:
+            raise SettingsError(f"patch size must be positive, got {m.patch_size}")
+        if self.cache_mb < 0:
+            raise SettingsError(f"cache must be >= 0 MiB, got {self.cache_mb}")
+
+    def system_settings(self) -> dict[str, Any]:
+        """The settings that define the discrete system (for checkpoint fingerprints)."""
+        return {"mesh": dataclasses.asdict(self.mesh), "scale": self.scale}
+
+
+@dataclass
+class Prepared:
+    """A scene made ready to solve: its mesh and form-factor engine."""
+
+    scene: Scene
+    mesh: RadiosityMesh
+    engine: FormFactorEngine
+    occluder: Occluder | None
+    timings: dict[str, float]
+
+    def close(self) -> None:
+        self.engine.close()
+        if self.occluder is not None:
+            self.occluder.close()
+
+
+@dataclass
+class RenderOutcome:
+    """What :func:`render` did and wrote."""
+
+    result: SolveResult
+    prepared: Prepared
+    outputs: dict[str, Path]
+    report: dict[str, Any]
+
+
+@contextmanager
+def _timed(timings: dict[str, float], stage: str) -> Iterator[None]:
+    start = time.perf_counter()
+    try:
+        yield
+    finally:
+        timings[stage] = timings.get(stage, 0.0) + time.perf_counter() - start
+
+
+def prepare(scene: Scene, settings: RenderSettings | None = None) -> Prepared:
+    """Mesh ``scene`` and build its visibility structure.
+
+    No acceleration structure is built when nothing can occlude (a convex enclosure).
+    """
+    settings = settings or RenderSettings()
+    timings: dict[str, float] = {}
+    with _timed(timings, "mesh"):
+        mesh = build_mesh(scene, settings.mesh)
+    with _timed(timings, "acceleration"):
+        extent = float(np.ptp(mesh.positions, axis=0).max())
+        occluder = None
+        if not nothing_can_occlude(scene.positions, scene.triangles, 1e-7 * extent):
+            occluder = Occluder(scene.positions, scene.triangles)
+    engine = FormFactorEngine(mesh, occluder, cache_bytes=int(settings.cache_mb * (1 << 20)))
+    return Prepared(scene, mesh, engine, occluder, timings)
+
+
+def render(
+    scene_path: str | Path,
+    output_dir: str | Path,
+    settings: RenderSettings | None = None,
+    resume: bool = False,
+    progress: Callable[[SolverState, float], None] | None = None,
+    stop: Callable[[], bool] | None = None,
+) -> RenderOutcome:
+    """Load, mesh, solve and write ``<output_dir>/<stem>.ply`` and ``report.json``.
+
+    Parameters
+    ----------
+    scene_path : path-like
+        OBJ (+MTL), glTF 2.0 (.gltf/.glb) or PLY file.
+    output_dir : path-like
+        Created if missing; outputs are replaced atomically.
+    settings : RenderSettings
+    resume : bool
+        Continue from ``<output_dir>/<stem>.checkpoint.npz`` if it exists.
+    progress : callable or None
+        ``progress(state, residual)`` after each shot.
+    stop : callable or None
+        Polled before each shot; True stops the solve, writes the outputs so far and a
+        checkpoint to resume from.
+
+    Raises
+    ------
+    SceneError
+        Bad scene file (nothing is written).
+    """
+    settings = settings or RenderSettings()
+    scene_path = Path(scene_path)
+    output_dir = Path(output_dir)
+    timings: dict[str, float] = {}
+    with _timed(timings, "load"):
+        scene = load_scene(scene_path, scale=settings.scale)
+    if not has_emission(scene):
+        log.warning("%s: the scene has no emitter; every radiosity is zero", scene_path)
+    prepared = prepare(scene, settings)
+    timings.update(prepared.timings)
+    stem = scene_path.stem
+    checkpoint = output_dir / f"{stem}.checkpoint.npz"
+    key = fingerprint(scene_path.read_bytes(), settings.system_settings())
+    state = None
+    if resume and checkpoint.exists():
+        state = load_checkpoint(checkpoint, key)
+        log.info("resuming from %s at shot %d", checkpoint, state.shots)
+
+    last_save = [time.perf_counter()]
+
+    def on_shot(s: SolverState, residual: float) -> None:
+        if progress is not None:
+            progress(s, residual)
+        if time.perf_counter() - last_save[0] >= settings.checkpoint_seconds:
+            output_dir.mkdir(parents=True, exist_ok=True)
+            save_checkpoint(checkpoint, s, key)
+            last_save[0] = time.perf_counter()
+
+    try:
+        with _timed(timings, "solve"):
+            result = solve(prepared.mesh, prepared.engine, settings.solve, state, on_shot, stop)
+        with _timed(timings, "write"):
+            outputs = _write_outputs(prepared, result, output_dir, stem, settings)
+        if result.stop_reason == "interrupted":
+            save_checkpoint(checkpoint, result.state, key)
+            outputs["checkpoint"] = checkpoint
+        elif checkpoint.exists():
+            checkpoint.unlink()
+        report = build_report(scene_path, prepared, result, settings, timings, outputs)
+        report_path = output_dir / "report.json"
+        with atomic_write(report_path, "w") as handle:
+            json.dump(report, handle, indent=2)
+        outputs["report"] = report_path
+    finally:
+        prepared.close()
+    return RenderOutcome(result, prepared, outputs, report)
+
+
+def _write_outputs(
+    prepared: Prepared, result: SolveResult, output_dir: Path, stem: str, settings: RenderSettings
+) -> dict[str, Path]:
+    mesh = prepared.mesh
+    emitting = (mesh.receiver_emitted_exitance > 0).any(axis=1)
+    colors = display_colors(result.radiosity, emitting, settings.exposure)
+    ply = output_dir / f"{stem}.ply"
+    write_radiosity_ply(
+        ply, mesh.receiver_position, mesh.triangle_receivers, result.radiosity, colors
+    )
+    return {"ply": ply}
+
+
+def build_report(
+    scene_path: Path,
+    prepared: Prepared,
+    result: SolveResult,
+    settings: RenderSettings,
+    timings: dict[str, float],
+    outputs: dict[str, Path],
+) -> dict[str, Any]:
+    """The JSON-ready summary of a render: settings, statistics, timings, energy ledger."""
+    mesh, state = prepared.mesh, result.state
+    rays_per_second = state.rays / state.seconds if state.seconds > 0 else 0.0
+    return {
+        "raytrad_version": __version__,
+        "scene": str(scene_path),
+        "settings": {
+            "mesh": dataclasses.asdict(settings.mesh),
+            "solve": dataclasses.asdict(settings.solve),
+            "scale": settings.scale,
+            "exposure": settings.exposure,
+            "cache_mb": settings.cache_mb,
+        },
+        "statistics": {
+            "scene_triangles": prepared.scene.triangle_count,
+            "triangles": int(len(mesh.triangles)),
+            "receivers": mesh.receiver_count,
+            "patches": mesh.patch_count,
+            "subareas": mesh.subarea_count,
+            "occlusion_tested": prepared.occluder is not None,
+        },
+        "timings_seconds": timings,
+        "solve": {
+            "method": result.method,
+            "stop_reason": result.stop_reason,
+            "shots": state.shots,
+            "rays": state.rays,
+            "rays_per_second": rays_per_second,
+            "form_factor_columns": prepared.engine.columns_computed,
+            "residual": result.residual,
+            "seconds": state.seconds,
+            "ambient_gain": state.ambient_gain,
+        },
+        "energy_watts": {
+            "emitted": result.emitted_power.tolist(),
+            "absorbed": state.absorbed.tolist(),
+            "escaped": state.escaped.tolist(),
+            "unshot": result.unshot_power.tolist(),
+        },
+        "outputs": {k: str(v) for k, v in outputs.items()},
+    }
+
+
+def solve_scene(
+    scene: Scene, settings: RenderSettings | None = None
+) -> tuple[Prepared, SolveResult]:
+    """Mesh and solve an in-memory scene; nothing is written (for batch jobs and tests)."""
+    settings = settings or RenderSettings()
+    prepared = prepare(scene, settings)
+    try:
+        result = solve(prepared.mesh, prepared.engine, settings.solve)
+    finally:
+        prepared.close()
+    return prepared, result
+
+
+__all__ = [
+    "Prepared",
+    "RaytradError",
+    "RenderOutcome",
+    "RenderSettings",
+    "build_report",
+    "prepare",
+    "render",
+    "solve_scene",
+]

@@ -1,0 +1,215 @@
+"""``raytrad`` command line: argument parsing, progress and messages; no numerics here."""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import signal
+import sys
+import time
+from collections.abc import Sequence
+from pathlib import Path
+from types import FrameType
+from typing import Any
+
+from raytrad import __version__
+from raytrad.errors import RaytradError
+from raytrad.mesh import MeshSettings
+from raytrad.solver import SHOOTING_METHODS, SolverState, SolveSettings
+
+log = logging.getLogger("raytrad")
+
+_METHOD_HELP = {
+    "progressive": "plain progressive refinement (Cohen et al. 1988)",
+    "overrelaxation": "progressive refinement shooting omega times the unshot radiosity",
+    "ambient": "ambient overshooting (Feda 1992), the default and usually fastest",
+}
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="raytrad",
+        description="Ray-traced radiosity: bake converged diffuse interreflection into the "
+        "vertices of a scene (vertex-to-patch progressive radiosity, Embree visibility).",
+    )
+    parser.add_argument("--version", action="version", version=f"raytrad {__version__}")
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    render = sub.add_parser(
+        "render",
+        help="solve a scene and write per-vertex radiosity (PLY) and report.json",
+        description="Solve SCENE and write OUT/<name>.ply (float radiosity_r/g/b [W m-2] "
+        "and 8-bit display colours per vertex) and OUT/report.json.",
+        epilog="Units: scene coordinates in metres (see --scale); OBJ Kd = reflectance, "
+        "Ke = emitted exitance [W m-2]; glTF emissive = radiance [W sr-1 m-2].",
+    )
+    render.add_argument("scene", type=Path, metavar="SCENE",
+                        help="scene file: .obj (+.mtl), .gltf, .glb or .ply")
+    render.add_argument("-o", "--output", type=Path, default=Path("raytrad-out"), metavar="DIR",
+                        help="output directory (default: %(default)s)")
+    methods = ", ".join(f"{k}: {_METHOD_HELP.get(k, k)}" for k in SHOOTING_METHODS)
+    render.add_argument("--method", choices=list(SHOOTING_METHODS), default="ambient",
+                        help=f"solver ({methods}); default: %(default)s")
+    render.add_argument("--tolerance", type=float, default=1e-3,
+                        help="stop when the unshot power falls below this fraction of the "
+                        "emitted power (default: %(default)g)")
+    render.add_argument("--time-limit", type=float, default=None, metavar="SECONDS",
+                        help="stop solving after this many seconds")
+    render.add_argument("--max-shots", type=int, default=None, metavar="N",
+                        help="stop after N shots")
+    render.add_argument("--omega", type=float, default=1.3,
+                        help="overrelaxation factor for --method overrelaxation "
+                        "(default: %(default)s)")
+    defaults = MeshSettings()
+    render.add_argument("--receivers", type=int, default=defaults.receivers, metavar="N",
+                        help="target receiver (vertex) count; the mesh is refined to reach "
+                        "it (default: %(default)s)")
+    render.add_argument("--max-edge", type=float, default=None, metavar="METRES",
+                        help="refine until no edge is longer than this [m] "
+                        "(overrides --receivers)")
+    render.add_argument("--patches", type=int, default=defaults.patches, metavar="N",
+                        help="target shooting-patch count (default: %(default)s)")
+    render.add_argument("--patch-size", type=float, default=None, metavar="METRES",
+                        help="largest patch extent [m] (overrides --patches)")
+    render.add_argument("--samples", type=int, default=defaults.samples, metavar="N",
+                        help="visibility sample points per patch (default: %(default)s)")
+    render.add_argument("--emitter-samples", type=int, default=defaults.emitter_samples,
+                        metavar="N", help="sample points per emitting patch; more give "
+                        "smoother direct shadows (default: %(default)s)")
+    render.add_argument("--seed", type=int, default=0,
+                        help="seed of the sample points; same seed, same result "
+                        "(default: %(default)s)")
+    render.add_argument("--scale", type=float, default=1.0,
+                        help="multiply coordinates by this to get metres, e.g. 0.001 for "
+                        "millimetres (default: %(default)s)")
+    render.add_argument("--exposure", type=float, default=0.0, metavar="EV",
+                        help="brighten the PLY display colours by EV stops on top of the "
+                        "automatic exposure (default: %(default)s)")
+    render.add_argument("--cache-mb", type=float, default=1024.0, metavar="MIB",
+                        help="memory for reusing form factors between shots of a patch "
+                        "(default: %(default)s)")
+    render.add_argument("--resume", action="store_true",
+                        help="continue an interrupted run from its checkpoint in DIR")
+    render.add_argument("-q", "--quiet", action="store_true",
+                        help="no progress bar, only warnings and errors")
+    render.add_argument("-v", "--verbose", action="store_true", help="log details")
+    return parser
+
+
+class _Progress:
+    """A tqdm progress bar on a terminal; nothing when output is redirected (CI logs)."""
+
+    def __init__(self, enabled: bool) -> None:
+        self._bar: Any = None
+        if enabled and sys.stderr.isatty():
+            from tqdm import tqdm
+
+            self._bar = tqdm(unit="shot", dynamic_ncols=True, file=sys.stderr, mininterval=0.25)
+        self._last = 0.0
+
+    def __call__(self, state: SolverState, residual: float) -> None:
+        if self._bar is None:
+            return
+        self._bar.update(state.shots - self._bar.n)
+        now = time.perf_counter()
+        if now - self._last > 0.25:
+            rate = state.rays / state.seconds if state.seconds > 0 else 0.0
+            self._bar.set_postfix_str(f"residual {residual:.2e}  rays/s {rate:.3g}")
+            self._last = now
+
+    def close(self) -> None:
+        if self._bar is not None:
+            self._bar.close()
+
+
+class _StopFlag:
+    """First Ctrl-C asks the solve to stop cleanly (then a checkpoint is written)."""
+
+    def __init__(self) -> None:
+        self.requested = False
+
+    def __call__(self) -> bool:
+        return self.requested
+
+    def handler(self, signum: int, frame: FrameType | None) -> None:
+        if self.requested:
+            raise KeyboardInterrupt
+        self.requested = True
+        print("\nraytrad: stopping after this shot (Ctrl-C again to abort)", file=sys.stderr)
+
+
+def _render(args: argparse.Namespace) -> int:
+    from raytrad import api
+
+    settings = api.RenderSettings(
+        mesh=MeshSettings(
+            max_edge=args.max_edge,
+            receivers=args.receivers,
+            patch_size=args.patch_size,
+            patches=args.patches,
+            samples=args.samples,
+            emitter_samples=args.emitter_samples,
+            seed=args.seed,
+        ),
+        solve=SolveSettings(
+            method=args.method,
+            tolerance=args.tolerance,
+            time_limit=args.time_limit,
+            max_shots=args.max_shots,
+            omega=args.omega,
+        ),
+        scale=args.scale,
+        exposure=args.exposure,
+        cache_mb=args.cache_mb,
+    )
+    progress = _Progress(enabled=not args.quiet)
+    stop = _StopFlag()
+    previous = signal.signal(signal.SIGINT, stop.handler)
+    try:
+        outcome = api.render(args.scene, args.output, settings, args.resume, progress, stop)
+    finally:
+        signal.signal(signal.SIGINT, previous)
+        progress.close()
+    if not args.quiet:
+        _print_summary(outcome.report)
+    return 130 if outcome.result.stop_reason == "interrupted" else 0
+
+
+def _print_summary(report: dict[str, Any]) -> None:
+    s, stats, t = report["solve"], report["statistics"], report["timings_seconds"]
+    total = sum(t.values())
+    lines = [
+        f"scene      {report['scene']}: {stats['receivers']} receivers, "
+        f"{stats['patches']} patches, {stats['subareas']} sample points",
+        f"solve      {s['method']}: {s['stop_reason']} after {s['shots']} shots, "
+        f"residual {s['residual']:.2e}",
+        f"rays       {s['rays']} ({s['rays_per_second']:.3g} rays/s"
+        + ("" if stats["occlusion_tested"] else "; nothing can occlude, no rays needed")
+        + ")",
+        "time       " + ", ".join(f"{k} {v:.2f}s" for k, v in t.items()) + f"; total {total:.2f}s",
+    ]
+    lines += [f"wrote      {path}" for path in report["outputs"].values()]
+    print("\n".join(lines))
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of the ``raytrad`` console script; returns the exit status."""
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    level = logging.DEBUG if args.verbose else logging.WARNING if args.quiet else logging.INFO
+    logging.basicConfig(level=level, format="raytrad: %(levelname)s: %(message)s")
+    logging.getLogger("trimesh").setLevel(logging.ERROR)
+    try:
+        if args.command == "render":
+            return _render(args)
+    except RaytradError as exc:
+        print(f"raytrad: error: {exc}", file=sys.stderr)
+        return 1
+    except KeyboardInterrupt:
+        print("raytrad: aborted", file=sys.stderr)
+        return 130
+    parser.error(f"unknown command {args.command}")
+    return 2
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

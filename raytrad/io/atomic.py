@@ -1,0 +1,102 @@
+"""Write a file so that readers see either the old content or the complete new content."""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import os
+import tempfile
+from collections.abc import Iterator
+from pathlib import Path
+from typing import IO, Any
+
+log = logging.getLogger(__name__)
+
+_MODES = ("w", "wb")
+
+
+@contextlib.contextmanager
+def atomic_write(path: str | os.PathLike[str], mode: str = "wb") -> Iterator[IO[Any]]:
+    """Open a temporary file next to ``path`` and move it over ``path`` when the body succeeds.
+
+    The data goes to a hidden temporary file in the same directory (so the final
+    :func:`os.replace` is an atomic rename on one file system), is flushed and fsynced,
+    and only then replaces ``path``. If the body raises, the temporary file is deleted,
+    ``path`` is left as it was and the exception propagates.
+
+    Parameters
+    ----------
+    path : path-like
+        The file to write. Its parent directory is created if missing.
+    mode : {"wb", "w"}
+        Binary, or text (UTF-8 with ``"\\n"`` line endings).
+
+    Yields
+    ------
+    file object
+        The open temporary file to write to.
+    """
+    if mode not in _MODES:
+        raise ValueError(f"atomic_write mode must be one of {_MODES}, not {mode!r}")
+    target = Path(path)
+    target.parent.mkdir(parents=True, exist_ok=True)
+    text = mode == "w"
+    # delete=False: once closed, the file is renamed over the target, or removed on error.
+    tmp = tempfile.NamedTemporaryFile(
+        mode=mode,
+        dir=target.parent,
+        prefix=f".{target.name}.",
+        suffix=".tmp",
+        delete=False,
+        encoding="utf-8" if text else None,
+        newline="\n" if text else None,
+    )
+    tmp_path = Path(tmp.name)
+    try:
+        with tmp:
+            yield tmp
+            tmp.flush()
+            os.fsync(tmp.fileno())
+        os.chmod(tmp_path, _final_permissions(target))
+        os.replace(tmp_path, target)
+    except BaseException:
+        with contextlib.suppress(FileNotFoundError):
+            tmp_path.unlink()
+        raise
+    _fsync_directory(target.parent)
+
+
+def _final_permissions(target: Path) -> int:
+    """Permission bits for the new file: those of the file it replaces, else 0o666 & ~umask.
+
+    (A temporary file is created 0o600; without this every written file would be private.)
+    """
+    try:
+        return target.stat().st_mode & 0o7777
+    except FileNotFoundError:
+        return 0o666 & ~_umask()
+
+
+def _umask() -> int:
+    """The process umask, read without changing it where the platform allows."""
+    with contextlib.suppress(OSError, ValueError):
+        for line in Path("/proc/self/status").read_text().splitlines():
+            if line.startswith("Umask:"):
+                return int(line.split()[1], 8)
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return mask
+
+
+def _fsync_directory(directory: Path) -> None:
+    """Make the rename durable (POSIX); a no-op where directories cannot be opened."""
+    try:
+        fd = os.open(directory, os.O_RDONLY)
+    except OSError:
+        return
+    try:
+        os.fsync(fd)
+    except OSError:
+        log.debug("could not fsync directory %s", directory)
+    finally:
+        os.close(fd)

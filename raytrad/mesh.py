@@ -1,0 +1,594 @@
+"""From a :class:`~raytrad.scene.Scene` to the radiosity mesh: receivers, patches and sub-areas.
+
+* **Receivers** are the vertices of the refined triangle mesh, one per *surface*: a vertex
+  where two surfaces meet at a crease, or where materials change, is a separate receiver on
+  each side, so light never blurs across a room corner.
+* **Patches** shoot. A patch is a group of refined triangles of one surface, no larger than
+  ``patch_size`` across.
+* **Sub-areas** split each patch into a few groups of triangles; each has one fixed sample
+  point, the point the visibility rays aim at (Wallace et al. 1989).
+
+Everything is flat arrays; no Python object per element.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from raytrad.scene import Scene, triangle_areas_normals
+
+log = logging.getLogger(__name__)
+
+#: Surfaces meeting at more than this dihedral angle are separate receivers [degrees].
+CREASE_ANGLE = 30.0
+
+
+@dataclass(frozen=True, eq=False)
+class RadiosityMesh:
+    """The discretisation the solver works on.
+
+    Attributes (R receivers, T refined triangles, P patches, S sub-areas)
+    ------------------------------------------------------------------------
+    receiver_position : (R, 3) float64 [m]
+    receiver_normal : (R, 3) float64, unit
+    receiver_area : (R,) float64 [m2], a third of the area of each adjacent triangle
+    receiver_inward : (R, 3) float64 [m], the mean centroid of the receiver's own triangles
+        (a point strictly inside its surface, used to start rays off adjacent planes)
+    receiver_reflectance : (R, 3) float64 [1]
+    receiver_emitted_exitance : (R, 3) float64 [W m-2]
+    triangle_receivers : (T, 3) int64, receiver index of each refined corner
+    triangle_area : (T,) float64 [m2]
+    triangle_normal : (T, 3) float64
+    triangle_patch : (T,) int64
+    triangle_subarea : (T,) int64
+    triangle_source : (T,) int64, index of the scene triangle each refined triangle came from
+    patch_area : (P,) float64 [m2]
+    patch_reflectance : (P, 3) float64 [1]
+    patch_center : (P, 3) float64 [m], area-weighted centroid
+    patch_radius : (P,) float64 [m], bounding-sphere radius about ``patch_center``
+    patch_normal : (P, 3) float64, unit area-weighted normal
+    patch_planar : (P,) bool, all triangles share ``patch_normal``
+    subarea_patch : (S,) int64, sorted ascending
+    subarea_area : (S,) float64 [m2]
+    subarea_point : (S, 3) float64 [m], the fixed sample point
+    subarea_normal : (S, 3) float64, normal of the triangle holding the sample point
+    subarea_size : (S,) float64 [m], bounding-box diagonal of the sub-area
+    positions : (V, 3) float64 [m], vertex positions of the refined mesh
+    triangles : (T, 3) int64, vertex indices of the refined mesh
+    """
+
+    receiver_position: np.ndarray
+    receiver_normal: np.ndarray
+    receiver_area: np.ndarray
+    receiver_inward: np.ndarray
+    receiver_reflectance: np.ndarray
+    receiver_emitted_exitance: np.ndarray
+    triangle_receivers: np.ndarray
+    triangle_area: np.ndarray
+    triangle_normal: np.ndarray
+    triangle_patch: np.ndarray
+    triangle_subarea: np.ndarray
+    triangle_source: np.ndarray
+    patch_area: np.ndarray
+    patch_reflectance: np.ndarray
+    patch_center: np.ndarray
+    patch_radius: np.ndarray
+    patch_normal: np.ndarray
+    patch_planar: np.ndarray
+    subarea_patch: np.ndarray
+    subarea_area: np.ndarray
+    subarea_point: np.ndarray
+    subarea_normal: np.ndarray
+    subarea_size: np.ndarray
+    positions: np.ndarray
+    triangles: np.ndarray
+
+    @property
+    def receiver_count(self) -> int:
+        return int(self.receiver_position.shape[0])
+
+    @property
+    def patch_count(self) -> int:
+        return int(self.patch_area.shape[0])
+
+    @property
+    def subarea_count(self) -> int:
+        return int(self.subarea_area.shape[0])
+
+    def patch_subareas(self, patch: int) -> slice:
+        """The slice of sub-area indices belonging to ``patch``."""
+        lo, hi = np.searchsorted(self.subarea_patch, [patch, patch + 1])
+        return slice(int(lo), int(hi))
+
+
+# --------------------------------------------------------------------------------------
+# Vertices and refinement
+# --------------------------------------------------------------------------------------
+
+
+def merge_vertices(
+    positions: np.ndarray, triangles: np.ndarray, tolerance: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """Merge vertices closer than about ``tolerance`` (quantised to a grid of that pitch).
+
+    Returns
+    -------
+    positions : (V', 3) float64
+    triangles : (T, 3) int64, re-indexed
+    """
+    used = np.unique(triangles)
+    key = np.round((positions[used] - positions[used].min(axis=0)) / tolerance).astype(np.int64)
+    _, first, inverse = np.unique(key, axis=0, return_index=True, return_inverse=True)
+    remap = np.full(positions.shape[0], -1, dtype=np.int64)
+    remap[used] = inverse.reshape(-1)
+    return positions[used[first]], remap[triangles]
+
+
+def _unique_edges(triangles: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Unique undirected edges and, per triangle, the index of edge k = (v_k, v_{k+1})."""
+    directed = np.stack([triangles, np.roll(triangles, -1, axis=1)], axis=2).reshape(-1, 2)
+    edges, inverse = np.unique(np.sort(directed, axis=1), axis=0, return_inverse=True)
+    return edges, inverse.reshape(-1, 3)
+
+
+def refine(
+    positions: np.ndarray, triangles: np.ndarray, max_edge: float, max_rounds: int = 40
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Conforming refinement until no edge is longer than ``max_edge``.
+
+    Edges are split at their midpoints, once per unique edge, so triangles that share an
+    edge stay conforming (no T-junctions are created). Whenever a triangle has a split
+    edge its longest edge is split too (longest-edge closure), which keeps the triangles
+    from degrading: 1 split edge bisects, 2 give three triangles, 3 give four similar ones.
+
+    Parameters
+    ----------
+    positions : (V, 3) float64 [m]
+    triangles : (T, 3) int64
+    max_edge : float [m]
+
+    Returns
+    -------
+    positions : (V', 3) float64
+    triangles : (T', 3) int64, same winding as their parents
+    parent : (T',) int64, the input triangle each output triangle lies in
+    """
+    positions = np.asarray(positions, dtype=np.float64)
+    triangles = np.asarray(triangles, dtype=np.int64)
+    parent = np.arange(triangles.shape[0])
+    for _ in range(max_rounds):
+        edges, tri_edges = _unique_edges(triangles)
+        length = np.linalg.norm(positions[edges[:, 1]] - positions[edges[:, 0]], axis=1)
+        marked = length > max_edge
+        if not marked.any():
+            break
+        longest = np.argmax(length[tri_edges], axis=1)
+        longest_edge = tri_edges[np.arange(len(triangles)), longest]
+        while True:  # longest-edge closure
+            needs = marked[tri_edges].any(axis=1) & ~marked[longest_edge]
+            if not needs.any():
+                break
+            marked[longest_edge[needs]] = True
+        midpoint_index = np.full(len(edges), -1, dtype=np.int64)
+        midpoint_index[marked] = positions.shape[0] + np.arange(int(marked.sum()))
+        midpoints = 0.5 * (positions[edges[marked, 0]] + positions[edges[marked, 1]])
+        positions = np.concatenate([positions, midpoints])
+        triangles, keep = _split_triangles(triangles, tri_edges, longest, midpoint_index)
+        parent = parent[keep]
+    else:
+        log.warning("refinement stopped after %d rounds", max_rounds)
+    return positions, triangles, parent
+
+
+def _split_triangles(
+    triangles: np.ndarray, tri_edges: np.ndarray, longest: np.ndarray, midpoint: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Split each triangle by the midpoints of its marked edges (see :func:`refine`)."""
+    t = np.arange(len(triangles))
+    # Rotate so that the longest edge is edge 0 = (a, b), c opposite; winding is kept.
+    rot = (longest[:, None] + np.arange(3)[None, :]) % 3
+    a, b, c = (triangles[t[:, None], rot][:, k] for k in range(3))
+    e = tri_edges[t[:, None], rot]
+    m0, m1, m2 = midpoint[e[:, 0]], midpoint[e[:, 1]], midpoint[e[:, 2]]
+    s0, s1, s2 = m0 >= 0, m1 >= 0, m2 >= 0
+    none = ~s0
+    only0 = s0 & ~s1 & ~s2
+    with1 = s0 & s1 & ~s2
+    with2 = s0 & ~s1 & s2
+    red = s0 & s1 & s2
+    pieces = [
+        (none, [(a, b, c)]),
+        (only0, [(a, m0, c), (m0, b, c)]),
+        (with1, [(a, m0, c), (m0, b, m1), (m0, m1, c)]),
+        (with2, [(m0, b, c), (a, m0, m2), (m0, c, m2)]),
+        (red, [(a, m0, m2), (m0, b, m1), (m2, m1, c), (m0, m1, m2)]),
+    ]
+    out, keep = [], []
+    for mask, tris in pieces:
+        idx = np.nonzero(mask)[0]
+        for p, q, r in tris:
+            out.append(np.stack([p[idx], q[idx], r[idx]], axis=1))
+            keep.append(idx)
+    return np.concatenate(out), np.concatenate(keep)
+
+
+def max_edge_for_receivers(total_area: float, receivers: int) -> float:
+    """The edge length whose near-equilateral mesh has about ``receivers`` vertices.
+
+    A mesh of equilateral triangles of edge h has about 2 / (sqrt(3) / 4 h^2) / ... that is,
+    twice as many triangles as vertices, so V ~ A / (sqrt(3) / 2 * h^2). Refinement splits
+    edges at midpoints, so the realised edge lies in (h/2, h]; 1.5 compensates on average.
+    """
+    return math.sqrt(total_area / (receivers * math.sqrt(3.0) / 2.0)) * 1.5
+
+
+# --------------------------------------------------------------------------------------
+# Surfaces
+# --------------------------------------------------------------------------------------
+
+
+def connected_labels(count: int, pairs: np.ndarray) -> np.ndarray:
+    """Connected-component labels of ``count`` nodes joined by ``pairs`` ((E, 2) int).
+
+    Hook-and-shortcut union-find, vectorised; labels are consecutive from 0.
+    """
+    parent = np.arange(count)
+    if len(pairs):
+        while True:
+            a, b = parent[pairs[:, 0]], parent[pairs[:, 1]]
+            differ = a != b
+            if not differ.any():
+                break
+            lo, hi = np.minimum(a, b)[differ], np.maximum(a, b)[differ]
+            np.minimum.at(parent, hi, lo)
+            while True:
+                jumped = parent[parent]
+                if np.array_equal(jumped, parent):
+                    break
+                parent = jumped
+    return np.unique(parent, return_inverse=True)[1].reshape(-1)
+
+
+def surface_labels(
+    positions: np.ndarray, triangles: np.ndarray, material: np.ndarray, crease_angle: float
+) -> np.ndarray:
+    """Label triangles that form one smooth surface of one material.
+
+    Two triangles sharing an edge belong to the same surface when their materials match and
+    their normals differ by less than ``crease_angle`` degrees (opposite-facing copies of a
+    double-sided face never do).
+
+    Returns
+    -------
+    (T,) int64 surface label per triangle.
+    """
+    _, normals = triangle_areas_normals(positions[triangles])
+    edges, tri_edges = _unique_edges(triangles)
+    owner = np.repeat(np.arange(len(triangles)), 3)
+    order = np.argsort(tri_edges.reshape(-1), kind="stable")
+    sorted_edges = tri_edges.reshape(-1)[order]
+    # consecutive owners of the same edge form candidate pairs (covers non-manifold edges)
+    same = sorted_edges[1:] == sorted_edges[:-1]
+    t0, t1 = owner[order][:-1][same], owner[order][1:][same]
+    cos_limit = math.cos(math.radians(crease_angle))
+    smooth = (np.einsum("ij,ij->i", normals[t0], normals[t1]) >= cos_limit) & (
+        material[t0] == material[t1]
+    )
+    return connected_labels(len(triangles), np.stack([t0[smooth], t1[smooth]], axis=1))
+
+
+# --------------------------------------------------------------------------------------
+# Clustering triangles into patches and sub-areas
+# --------------------------------------------------------------------------------------
+
+
+def _cluster_bounds(points: np.ndarray, labels: np.ndarray, count: int) -> tuple[np.ndarray, ...]:
+    lo = np.full((count, 3), np.inf)
+    hi = np.full((count, 3), -np.inf)
+    np.minimum.at(lo, labels, points)
+    np.maximum.at(hi, labels, points)
+    return lo, hi
+
+
+def bisect_clusters(
+    centroids: np.ndarray,
+    labels: np.ndarray,
+    split: callable,  # type: ignore[valid-type]
+    max_rounds: int = 64,
+) -> np.ndarray:
+    """Split clusters of points in half along their longest axis while ``split`` asks.
+
+    Parameters
+    ----------
+    centroids : (N, 3) float64
+        One point per item (triangle centroids) [m].
+    labels : (N,) int64
+        Initial cluster of each item.
+    split : callable
+        ``split(labels, extent) -> (C,) bool``: which of the C current clusters to split,
+        given their bounding-box extents ((C, 3) float64).
+
+    Returns
+    -------
+    (N,) int64 cluster labels, consecutive from 0.
+    """
+    labels = np.unique(labels, return_inverse=True)[1].reshape(-1)
+    for _ in range(max_rounds):
+        count = int(labels.max()) + 1
+        lo, hi = _cluster_bounds(centroids, labels, count)
+        extent = hi - lo
+        want = split(labels, extent) & (extent.max(axis=1) > 0)
+        if not want.any():
+            break
+        axis = np.argmax(extent, axis=1)
+        middle = 0.5 * (lo + hi)[np.arange(count), axis]
+        item_axis = axis[labels]
+        upper = want[labels] & (
+            centroids[np.arange(len(labels)), item_axis] > middle[labels]
+        )
+        new_label = count + np.cumsum(want) - 1
+        labels = np.where(upper, new_label[labels], labels)
+        labels = np.unique(labels, return_inverse=True)[1].reshape(-1)
+    return labels
+
+
+def _group_sorted(labels: np.ndarray) -> np.ndarray:
+    """Relabel so that labels are consecutive and sorted by the first item's position."""
+    _, first, inverse = np.unique(labels, return_index=True, return_inverse=True)
+    order = np.argsort(first, kind="stable")
+    rank = np.empty_like(order)
+    rank[order] = np.arange(len(order))
+    return rank[inverse.reshape(-1)]
+
+
+# --------------------------------------------------------------------------------------
+# Building the mesh
+# --------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class MeshSettings:
+    """How finely to discretise.
+
+    Attributes
+    ----------
+    max_edge : float or None
+        Longest refined edge [m]; None derives it from ``receivers``.
+    receivers : int
+        Target receiver count when ``max_edge`` is None.
+    patch_size : float or None
+        Largest patch extent [m]; None derives it from ``patches``.
+    patches : int
+        Target patch count when ``patch_size`` is None.
+    samples : int
+        Sub-areas (sample points) per patch.
+    emitter_samples : int
+        Sub-areas per emitting patch: direct shadows are the sharpest features.
+    seed : int
+        Seed of the sample-point placement.
+    """
+
+    max_edge: float | None = None
+    receivers: int = 20000
+    patch_size: float | None = None
+    patches: int = 400
+    samples: int = 16
+    emitter_samples: int = 64
+    seed: int = 0
+
+
+def build_mesh(scene: Scene, settings: MeshSettings | None = None) -> RadiosityMesh:
+    """Refine ``scene`` and build receivers, patches and sub-areas (see module docstring)."""
+    settings = settings or MeshSettings()
+    positions, triangles, material = _surface_triangles(scene)
+    base_area, _ = triangle_areas_normals(positions[triangles])
+    total_area = float(base_area.sum())
+    max_edge = settings.max_edge or max_edge_for_receivers(total_area, settings.receivers)
+    surface = surface_labels(positions, triangles, material, CREASE_ANGLE)
+    positions, fine, parent = refine(positions, triangles, max_edge)
+    fine_surface = surface[parent]
+    area, normal = triangle_areas_normals(positions[fine])
+    keep = area > 0
+    fine, parent, fine_surface, area, normal = (
+        fine[keep], parent[keep], fine_surface[keep], area[keep], normal[keep]
+    )
+    receivers = _receivers(positions, fine, fine_surface, area, normal)
+    triangle_receivers, r_pos, r_normal, r_area, r_inward = receivers
+    tri_material = material[parent]
+    r_material = np.empty(len(r_pos), dtype=np.int64)
+    r_material[triangle_receivers.reshape(-1)] = np.repeat(tri_material, 3)
+
+    centroids = positions[fine].mean(axis=1)
+    patch_size = settings.patch_size or math.sqrt(total_area / settings.patches)
+    patch = bisect_clusters(
+        centroids, fine_surface, lambda _l, extent: extent.max(axis=1) > patch_size
+    )
+    patch = _group_sorted(patch)
+    emissive = (scene.material_emitted_exitance[tri_material] > 0).any(axis=1)
+    subarea = _subareas(centroids, patch, emissive, settings)
+
+    mesh_source = _source_index(scene, parent)
+    return _assemble(
+        scene, positions, fine, area, normal, tri_material, mesh_source, patch, subarea,
+        triangle_receivers, r_pos, r_normal, r_area, r_inward, r_material, settings.seed,
+    )
+
+
+def _surface_triangles(scene: Scene) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Merged vertices and the triangle list, with a reversed copy of each double-sided one."""
+    used = np.unique(scene.triangles)
+    extent = float(np.ptp(scene.positions[used], axis=0).max())
+    positions, triangles = merge_vertices(scene.positions, scene.triangles, extent * 1e-9)
+    material = scene.material_index
+    two = scene.double_sided
+    if two.any():
+        triangles = np.concatenate([triangles, triangles[two][:, ::-1]])
+        material = np.concatenate([material, material[two]])
+    return positions, triangles, material
+
+
+def _source_index(scene: Scene, parent: np.ndarray) -> np.ndarray:
+    """Map refined triangles to the scene triangle they came from (copies to originals)."""
+    two = np.nonzero(scene.double_sided)[0]
+    source = np.concatenate([np.arange(scene.triangle_count), two])
+    return source[parent]
+
+
+def _receivers(
+    positions: np.ndarray,
+    triangles: np.ndarray,
+    surface: np.ndarray,
+    area: np.ndarray,
+    normal: np.ndarray,
+) -> tuple[np.ndarray, ...]:
+    """One receiver per (vertex, surface) pair, with its normal, area and inward point."""
+    corner_vertex = triangles.reshape(-1)
+    corner_surface = np.repeat(surface, 3)
+    keys = np.stack([corner_vertex, corner_surface], axis=1)
+    uniq, inverse = np.unique(keys, axis=0, return_inverse=True)
+    inverse = inverse.reshape(-1)
+    count = len(uniq)
+    third = np.repeat(area / 3.0, 3)
+    r_area = np.bincount(inverse, weights=third, minlength=count)
+    r_normal = np.zeros((count, 3))
+    r_inward = np.zeros((count, 3))
+    centroid = np.repeat(positions[triangles].mean(axis=1), 3, axis=0)
+    tri_normal = np.repeat(normal, 3, axis=0)
+    for k in range(3):
+        r_normal[:, k] = np.bincount(inverse, weights=tri_normal[:, k] * third, minlength=count)
+        r_inward[:, k] = np.bincount(inverse, weights=centroid[:, k] * third, minlength=count)
+    r_inward /= r_area[:, None]
+    r_normal /= np.linalg.norm(r_normal, axis=1)[:, None]
+    return inverse.reshape(-1, 3), positions[uniq[:, 0]], r_normal, r_area, r_inward
+
+
+def _subareas(
+    centroids: np.ndarray, patch: np.ndarray, emissive: np.ndarray, settings: MeshSettings
+) -> np.ndarray:
+    """Split each patch into about ``samples`` (emitters: ``emitter_samples``) sub-areas."""
+    count = int(patch.max()) + 1
+    patch_emissive = np.zeros(count, dtype=bool)
+    patch_emissive[patch[emissive]] = True
+    target = np.where(patch_emissive, settings.emitter_samples, settings.samples)
+    sub_to_patch = np.arange(count)
+
+    def split(labels: np.ndarray, extent: np.ndarray) -> np.ndarray:
+        nonlocal sub_to_patch
+        cluster_patch = np.zeros(int(labels.max()) + 1, dtype=np.int64)
+        cluster_patch[labels] = patch
+        sub_to_patch = cluster_patch
+        have = np.bincount(cluster_patch, minlength=count)
+        return np.asarray(have[cluster_patch] < target[cluster_patch])
+
+    labels = bisect_clusters(centroids, patch, split)
+    # order sub-areas by patch so each patch owns a contiguous range
+    sub_patch = np.zeros(int(labels.max()) + 1, dtype=np.int64)
+    sub_patch[labels] = patch
+    order = np.lexsort((np.arange(len(sub_patch)), sub_patch))
+    rank = np.empty_like(order)
+    rank[order] = np.arange(len(order))
+    return rank[labels]
+
+
+def _assemble(
+    scene: Scene,
+    positions: np.ndarray,
+    triangles: np.ndarray,
+    area: np.ndarray,
+    normal: np.ndarray,
+    tri_material: np.ndarray,
+    source: np.ndarray,
+    patch: np.ndarray,
+    subarea: np.ndarray,
+    triangle_receivers: np.ndarray,
+    r_pos: np.ndarray,
+    r_normal: np.ndarray,
+    r_area: np.ndarray,
+    r_inward: np.ndarray,
+    r_material: np.ndarray,
+    seed: int,
+) -> RadiosityMesh:
+    p_count = int(patch.max()) + 1
+    s_count = int(subarea.max()) + 1
+    corners = positions[triangles]
+    centroid = corners.mean(axis=1)
+    p_area = np.bincount(patch, weights=area, minlength=p_count)
+    p_center = np.stack(
+        [np.bincount(patch, weights=centroid[:, k] * area, minlength=p_count) for k in range(3)],
+        axis=1,
+    ) / p_area[:, None]
+    p_normal_sum = np.stack(
+        [np.bincount(patch, weights=normal[:, k] * area, minlength=p_count) for k in range(3)],
+        axis=1,
+    )
+    p_normal = p_normal_sum / np.maximum(np.linalg.norm(p_normal_sum, axis=1), 1e-300)[:, None]
+    planar = np.ones(p_count, dtype=bool)
+    np.logical_and.at(
+        planar, patch, np.einsum("ij,ij->i", normal, p_normal[patch]) > 1.0 - 1e-9
+    )
+    corner_dist = np.linalg.norm(corners - p_center[patch][:, None, :], axis=2).max(axis=1)
+    p_radius = np.zeros(p_count)
+    np.maximum.at(p_radius, patch, corner_dist)
+    p_reflectance = scene.material_reflectance[
+        tri_material[np.unique(patch, return_index=True)[1]]
+    ]
+
+    s_patch = np.zeros(s_count, dtype=np.int64)
+    s_patch[subarea] = patch
+    s_area = np.bincount(subarea, weights=area, minlength=s_count)
+    lo, hi = _cluster_bounds(corners.reshape(-1, 3), np.repeat(subarea, 3), s_count)
+    s_size = np.linalg.norm(hi - lo, axis=1)
+    rng = np.random.default_rng(seed)
+    chosen = _pick_triangles(subarea, area, s_count, rng)
+    u, v = rng.random(s_count), rng.random(s_count)
+    flip = u + v > 1.0
+    u, v = np.where(flip, 1.0 - u, u), np.where(flip, 1.0 - v, v)
+    c = corners[chosen]
+    s_point = c[:, 0] + u[:, None] * (c[:, 1] - c[:, 0]) + v[:, None] * (c[:, 2] - c[:, 0])
+
+    return RadiosityMesh(
+        receiver_position=r_pos,
+        receiver_normal=r_normal,
+        receiver_area=r_area,
+        receiver_inward=r_inward,
+        receiver_reflectance=scene.material_reflectance[r_material],
+        receiver_emitted_exitance=scene.material_emitted_exitance[r_material],
+        triangle_receivers=triangle_receivers,
+        triangle_area=area,
+        triangle_normal=normal,
+        triangle_patch=patch,
+        triangle_subarea=subarea,
+        triangle_source=source,
+        patch_area=p_area,
+        patch_reflectance=p_reflectance,
+        patch_center=p_center,
+        patch_radius=p_radius,
+        patch_normal=p_normal,
+        patch_planar=planar,
+        subarea_patch=s_patch,
+        subarea_area=s_area,
+        subarea_point=s_point,
+        subarea_normal=normal[chosen],
+        subarea_size=s_size,
+        positions=positions,
+        triangles=triangles,
+    )
+
+
+def _pick_triangles(
+    subarea: np.ndarray, area: np.ndarray, count: int, rng: np.random.Generator
+) -> np.ndarray:
+    """One triangle per sub-area, chosen with probability proportional to its area."""
+    order = np.lexsort((np.arange(len(subarea)), subarea))
+    cum = np.cumsum(area[order])
+    start = np.searchsorted(subarea[order], np.arange(count))
+    end = np.append(start[1:], len(order))
+    before = np.where(start > 0, cum[np.maximum(start - 1, 0)], 0.0)
+    target = before + rng.random(count) * (cum[end - 1] - before)
+    pick = np.searchsorted(cum, target, side="right")
+    pick = np.clip(pick, start, end - 1)
+    return order[pick]

@@ -1,0 +1,204 @@
+"""A scene as a few flat arrays: triangle geometry and per-material optical properties.
+
+Units: positions in metres [m]; reflectance is unitless diffuse albedo per linear RGB
+channel in [0, 1]; emitted exitance is radiant exitance per channel [W m-2] (a Lambertian
+emitter of radiance L has exitance pi * L).
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+import numpy as np
+
+from raytrad.errors import SceneError
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True, eq=False)
+class Scene:
+    """Triangle soup with materials.
+
+    Attributes
+    ----------
+    positions : (V, 3) float64
+        Vertex positions [m].
+    triangles : (T, 3) int64
+        Vertex indices of each triangle, counter-clockwise seen from the lit (front) side.
+    material_index : (T,) int64
+        Index into the material arrays for each triangle.
+    material_names : tuple of str
+        One name per material.
+    material_reflectance : (M, 3) float64
+        Diffuse reflectance per material and channel [1].
+    material_emitted_exitance : (M, 3) float64
+        Emitted exitance per material and channel [W m-2].
+    material_double_sided : (M,) bool
+        True where a surface receives and shoots on both sides.
+    source : Path or None
+        The file the scene came from, used in error messages.
+    """
+
+    positions: np.ndarray
+    triangles: np.ndarray
+    material_index: np.ndarray
+    material_names: tuple[str, ...]
+    material_reflectance: np.ndarray
+    material_emitted_exitance: np.ndarray
+    material_double_sided: np.ndarray
+    source: Path | None = field(default=None)
+
+    @property
+    def triangle_count(self) -> int:
+        return int(self.triangles.shape[0])
+
+    @property
+    def reflectance(self) -> np.ndarray:
+        """(T, 3) float64 per-triangle reflectance [1]."""
+        return np.asarray(self.material_reflectance[self.material_index])
+
+    @property
+    def emitted_exitance(self) -> np.ndarray:
+        """(T, 3) float64 per-triangle emitted exitance [W m-2]."""
+        return np.asarray(self.material_emitted_exitance[self.material_index])
+
+    @property
+    def double_sided(self) -> np.ndarray:
+        """(T,) bool per-triangle double-sidedness."""
+        return np.asarray(self.material_double_sided[self.material_index])
+
+    def triangle_vertices(self) -> np.ndarray:
+        """(T, 3, 3) float64 corner positions [m]."""
+        return np.asarray(self.positions[self.triangles])
+
+    def scaled(self, factor: float) -> Scene:
+        """The same scene with positions multiplied by ``factor`` (unit conversion)."""
+        return replace(self, positions=self.positions * float(factor))
+
+
+def triangle_areas_normals(corners: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Areas and unit normals of triangles.
+
+    Parameters
+    ----------
+    corners : (T, 3, 3) float
+        Triangle corner positions [m].
+
+    Returns
+    -------
+    areas : (T,) float64
+        Triangle areas [m2].
+    normals : (T, 3) float64
+        Unit normals (right-handed winding); zero rows for degenerate triangles.
+    """
+    corners = np.asarray(corners, dtype=np.float64)
+    cross = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+    norm = np.linalg.norm(cross, axis=1)
+    normals = np.zeros_like(cross)
+    ok = norm > 0
+    normals[ok] = cross[ok] / norm[ok, None]
+    return 0.5 * norm, normals
+
+
+def make_scene(
+    positions: np.ndarray,
+    triangles: np.ndarray,
+    material_index: np.ndarray,
+    material_names: tuple[str, ...] | list[str],
+    material_reflectance: np.ndarray,
+    material_emitted_exitance: np.ndarray,
+    material_double_sided: np.ndarray | None = None,
+    source: str | Path | None = None,
+) -> Scene:
+    """Build a validated :class:`Scene` from arrays (see :class:`Scene` for shapes and units).
+
+    Raises
+    ------
+    SceneError
+        Naming ``source`` and the problem, for anything that cannot give a finite answer.
+    """
+    names = tuple(str(n) for n in material_names)
+    m = len(names)
+    if material_double_sided is None:
+        material_double_sided = np.zeros(m, dtype=bool)
+    scene = Scene(
+        positions=np.asarray(positions, dtype=np.float64).reshape(-1, 3),
+        triangles=np.asarray(triangles, dtype=np.int64).reshape(-1, 3),
+        material_index=np.asarray(material_index, dtype=np.int64).reshape(-1),
+        material_names=names,
+        material_reflectance=np.asarray(material_reflectance, dtype=np.float64).reshape(m, 3),
+        material_emitted_exitance=np.asarray(material_emitted_exitance, dtype=np.float64).reshape(
+            m, 3
+        ),
+        material_double_sided=np.asarray(material_double_sided, dtype=bool).reshape(m),
+        source=None if source is None else Path(source),
+    )
+    return validate_scene(scene)
+
+
+def validate_scene(scene: Scene) -> Scene:
+    """Check a scene and drop zero-area triangles (with a warning).
+
+    Returns
+    -------
+    Scene
+        The scene, possibly without its degenerate triangles.
+
+    Raises
+    ------
+    SceneError
+        No faces, bad indices, non-finite coordinates, reflectance outside [0, 1],
+        negative or non-finite emission.
+    """
+    src = scene.source
+    if scene.triangles.shape[0] == 0:
+        raise SceneError(src, "the mesh has no faces")
+    if scene.material_index.shape[0] != scene.triangles.shape[0]:
+        raise SceneError(src, "material_index must have one entry per triangle")
+    nv = scene.positions.shape[0]
+    if scene.triangles.min() < 0 or scene.triangles.max() >= nv:
+        raise SceneError(src, f"a face refers to a vertex outside 0..{nv - 1}")
+    used = np.unique(scene.triangles)
+    bad = ~np.isfinite(scene.positions[used]).all(axis=1)
+    if bad.any():
+        raise SceneError(
+            src, f"{int(bad.sum())} vertices have NaN or infinite coordinates "
+            f"(first: vertex {int(used[bad][0])})"
+        )
+    nm = len(scene.material_names)
+    if scene.material_index.min() < 0 or scene.material_index.max() >= nm:
+        raise SceneError(src, "a face refers to a material that does not exist")
+    for i, name in enumerate(scene.material_names):
+        rho = scene.material_reflectance[i]
+        if not np.isfinite(rho).all() or rho.min() < 0.0 or rho.max() > 1.0:
+            raise SceneError(
+                src, f"material {name!r}: reflectance {rho.tolist()} is outside [0, 1]"
+            )
+        emission = scene.material_emitted_exitance[i]
+        if not np.isfinite(emission).all() or emission.min() < 0.0:
+            raise SceneError(
+                src, f"material {name!r}: emission {emission.tolist()} must be finite and >= 0"
+            )
+    areas, _ = triangle_areas_normals(scene.triangle_vertices())
+    extent = float(np.ptp(scene.positions[used], axis=0).max())
+    # A triangle is degenerate when its area is lost in float64 rounding at the scene's size.
+    degenerate = areas <= (extent * extent) * 1e-14
+    if degenerate.all():
+        raise SceneError(src, "every face has zero area")
+    if degenerate.any():
+        log.warning(
+            "%s: dropped %d zero-area triangles", src or "<scene>", int(degenerate.sum())
+        )
+        keep = ~degenerate
+        scene = replace(
+            scene, triangles=scene.triangles[keep], material_index=scene.material_index[keep]
+        )
+    return scene
+
+
+def has_emission(scene: Scene) -> bool:
+    """True when any triangle emits in any channel."""
+    return bool((scene.emitted_exitance > 0).any())

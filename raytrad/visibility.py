@@ -1,0 +1,170 @@
+"""Visibility between points: the one adapter module that imports embreex.
+
+Embree works in float32. Coordinates are shifted so the scene's bounding-box centre is the
+origin before conversion, so a model placed kilometres from the origin keeps the same
+precision as one at the origin; every query point goes through the same shift.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+from concurrent.futures import ThreadPoolExecutor
+
+import numpy as np
+
+log = logging.getLogger(__name__)
+
+#: Rays handed to Embree in one call; one chunk's arrays stay a few megabytes.
+RAY_CHUNK = 1 << 16
+
+
+def worker_count() -> int:
+    """Threads for ray batches: every core the process may use."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except AttributeError:  # pragma: no cover - not Linux
+        return max(1, os.cpu_count() or 1)
+
+
+class Occluder:
+    """Segment occlusion queries against a triangle mesh.
+
+    Parameters
+    ----------
+    positions : (V, 3) float64
+        Vertex positions [m].
+    triangles : (T, 3) int
+        Triangles that can block light.
+    robust : bool
+        Embree's robust traversal mode (slower; watertight edges).
+
+    Notes
+    -----
+    ``embreex.EmbreeScene.run`` releases the GIL, so batches run on all cores from a thread
+    pool; each call gets at most :data:`RAY_CHUNK` rays, so memory stays bounded.
+    """
+
+    def __init__(self, positions: np.ndarray, triangles: np.ndarray, robust: bool = False):
+        from embreex import rtcore_scene
+        from embreex.mesh_construction import TriangleMesh
+
+        positions = np.asarray(positions, dtype=np.float64)
+        used = np.unique(triangles)
+        lo, hi = positions[used].min(axis=0), positions[used].max(axis=0)
+        self.origin = 0.5 * (lo + hi)
+        self.diagonal = float(np.linalg.norm(hi - lo))
+        self._scene = rtcore_scene.EmbreeScene(robust=robust)
+        local = np.ascontiguousarray(positions - self.origin, dtype=np.float32)
+        TriangleMesh(self._scene, local, np.ascontiguousarray(triangles, dtype=np.int32))
+        self._workers = worker_count()
+        self._pool: ThreadPoolExecutor | None = None
+        self.rays_cast = 0
+        # the first query commits (builds) the BVH; do it now so timings are honest
+        self._scene.run(
+            np.zeros((1, 3), np.float32), np.full((1, 3), 3.0**-0.5, np.float32),
+            dists=np.zeros(1, np.float32), query="OCCLUDED",
+        )
+
+    def close(self) -> None:
+        if self._pool is not None:
+            self._pool.shutdown()
+            self._pool = None
+
+    def __enter__(self) -> Occluder:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def to_local(self, points: np.ndarray) -> np.ndarray:
+        """(N, 3) float64 world points [m] to the float32-friendly local frame [m]."""
+        return np.asarray(points, dtype=np.float64) - self.origin
+
+    def occluded_local(
+        self, origins: np.ndarray, directions: np.ndarray, distances: np.ndarray
+    ) -> np.ndarray:
+        """Occlusion of rays already in the local frame.
+
+        Parameters
+        ----------
+        origins : (N, 3) float
+            Ray origins in the local frame [m].
+        directions : (N, 3) float
+            Unit directions.
+        distances : (N,) float
+            Segment lengths [m]; hits beyond them do not count.
+
+        Returns
+        -------
+        (N,) bool, True where something blocks the open segment.
+        """
+        n = len(origins)
+        self.rays_cast += n
+        if n == 0:
+            return np.zeros(0, dtype=bool)
+        o = np.ascontiguousarray(origins, dtype=np.float32)
+        d = np.ascontiguousarray(directions, dtype=np.float32)
+        t = np.ascontiguousarray(distances, dtype=np.float32)
+        if n <= RAY_CHUNK or self._workers == 1:
+            return self._run(o, d, t)
+        bounds = list(range(0, n, RAY_CHUNK)) + [n]
+        if self._pool is None:
+            self._pool = ThreadPoolExecutor(self._workers, thread_name_prefix="raytrad-rays")
+        parts = self._pool.map(
+            lambda ab: self._run(o[ab[0]:ab[1]], d[ab[0]:ab[1]], t[ab[0]:ab[1]]),
+            zip(bounds[:-1], bounds[1:], strict=True),
+        )
+        return np.concatenate(list(parts))
+
+    def _run(self, o: np.ndarray, d: np.ndarray, t: np.ndarray) -> np.ndarray:
+        out = np.empty(len(o), dtype=bool)
+        for start in range(0, len(o), RAY_CHUNK):
+            stop = start + RAY_CHUNK
+            hit = self._scene.run(o[start:stop], d[start:stop], dists=t[start:stop].copy(),
+                                  query="OCCLUDED")
+            out[start:stop] = np.asarray(hit) != -1
+        return out
+
+    def occluded(self, starts: np.ndarray, ends: np.ndarray) -> np.ndarray:
+        """(N,) bool: is the open segment between world points ``starts`` and ``ends`` blocked?
+
+        Only the interior of the segment counts: a relative margin of 1e-6 of the scene
+        diagonal is left free at the end, so the target surface itself never blocks.
+        """
+        a = self.to_local(starts)
+        delta = self.to_local(ends) - a
+        length = np.linalg.norm(delta, axis=1)
+        direction = delta / np.maximum(length, 1e-300)[:, None]
+        return self.occluded_local(a, direction, np.maximum(length - 1e-6 * self.diagonal, 0.0))
+
+
+def nothing_can_occlude(positions: np.ndarray, triangles: np.ndarray, tolerance: float) -> bool:
+    """True when no segment between two scene points can cross a triangle.
+
+    That holds when every vertex lies on or in front of every triangle's plane: the scene is
+    the inside of a convex shell (a furnace box, a sphere seen from inside). Such a scene
+    needs no visibility rays at all.
+
+    Parameters
+    ----------
+    positions : (V, 3) float64 [m]
+    triangles : (T, 3) int
+    tolerance : float
+        Distance behind a plane still counted as on it [m].
+    """
+    points = positions[np.unique(triangles)]
+    if len(points) * len(triangles) > 50_000_000:
+        return False  # too big to prove convex cheaply; rays decide instead
+    corners = positions[triangles]
+    normal = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+    length = np.linalg.norm(normal, axis=1)
+    ok = length > 0
+    normal = normal[ok] / length[ok, None]
+    offset = np.einsum("ij,ij->i", normal, corners[ok, 0])
+    for start in range(0, len(normal), 256):
+        sl = slice(start, start + 256)
+        signed = points @ normal[sl].T - offset[sl][None, :]
+        if (signed < -tolerance).any():
+            return False
+    return True
