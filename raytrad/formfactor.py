@@ -439,12 +439,11 @@ class FormFactorEngine:
 
     def _blocked(self, origins: np.ndarray, targets: np.ndarray) -> np.ndarray:
         assert self.occluder is not None
-        origin = self.occluder.to_local(origins)
-        delta = self.occluder.to_local(targets) - origin
+        delta = targets - origins
         length = np.linalg.norm(delta, axis=1)
         direction = delta / np.where(length > 0, length, 1.0)[:, None]
         reach = np.maximum(length - RAY_OFFSET * self.diagonal, 0.0)
-        return self.occluder.occluded_local(origin, direction, reach)
+        return self.occluder.occluded_local(self.occluder.to_local(origins), direction, reach)
 
 
 def _receiver_points(mesh: RadiosityMesh, offset: float) -> tuple[np.ndarray, np.ndarray]:
@@ -488,6 +487,9 @@ def _patch_vertices(mesh: RadiosityMesh) -> tuple[np.ndarray, np.ndarray]:
 def _boundary_edges(mesh: RadiosityMesh) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Oriented boundary edges of each patch: edges used by one of its triangles only.
 
+    Consecutive collinear boundary edges are merged (Lambert's sum is additive along a
+    straight edge), so a refined rectangular patch has 4 edges however fine its triangles.
+
     Returns
     -------
     start, end : (E, 3) float64, edge endpoints [m], in the winding of their triangle
@@ -502,8 +504,55 @@ def _boundary_edges(mesh: RadiosityMesh) -> tuple[np.ndarray, np.ndarray, np.nda
     single = counts[inverse.reshape(-1)] == 1
     order = np.argsort(patch[single], kind="stable")
     a, b, patch = a[single][order], b[single][order], patch[single][order]
+    a, b, patch = _merge_collinear(mesh.positions, a, b, patch)
     pointer = np.searchsorted(patch, np.arange(mesh.patch_count + 1))
     return mesh.positions[a], mesh.positions[b], pointer
+
+
+def _merge_collinear(
+    positions: np.ndarray, a: np.ndarray, b: np.ndarray, patch: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Join boundary edges (a -> b) whose shared vertex is straight (collinear neighbours).
+
+    Only vertices with exactly one incoming and one outgoing boundary edge of the same
+    patch are candidates, so non-manifold boundaries are left as they are.
+    """
+    n = len(a)
+    start_key = patch * (positions.shape[0] + 1) + a
+    end_key = patch * (positions.shape[0] + 1) + b
+    sorted_start = np.argsort(start_key, kind="stable")
+    pos = np.searchsorted(start_key[sorted_start], end_key)
+    pos_c = np.minimum(pos, n - 1)
+    found = start_key[sorted_start[pos_c]] == end_key
+    # a vertex with two outgoing edges is ambiguous: no merging there
+    dup_start = np.zeros(n, dtype=bool)
+    ks = start_key[sorted_start]
+    twice = np.zeros(n, dtype=bool)
+    twice[1:] |= ks[1:] == ks[:-1]
+    twice[:-1] |= ks[1:] == ks[:-1]
+    dup_start[sorted_start] = twice
+    nxt = np.where(found, sorted_start[pos_c], -1)
+    ok = (nxt >= 0) & ~dup_start[np.maximum(nxt, 0)]
+    d0 = positions[b] - positions[a]
+    d1 = np.where(ok[:, None], d0[np.maximum(nxt, 0)], 0.0)
+    cross = np.linalg.norm(np.cross(d0, d1), axis=1)
+    scale = np.linalg.norm(d0, axis=1) * np.linalg.norm(d1, axis=1)
+    straight = ok & (cross <= 1e-12 * scale) & (np.einsum("ij,ij->i", d0, d1) > 0)
+    if not straight.any():
+        return a, b, patch
+    # the end of each edge's chain: follow straight joints (pointer jumping)
+    jump = np.where(straight, nxt, np.arange(n))
+    for _ in range(64):
+        jumped = jump[jump]
+        if np.array_equal(jumped, jump):
+            break
+        jump = jumped
+    removed_start = np.zeros(n, dtype=bool)
+    removed_start[nxt[straight]] = True
+    keep = ~removed_start
+    if not keep.any():  # a closed straight loop cannot happen for a real polygon
+        return a, b, patch
+    return a[keep], b[jump[keep]], patch[keep]
 
 
 def contour_form_factor(

@@ -250,6 +250,15 @@ class _Problem:
         return out
 
 
+def patch_average_matrix(mesh: RadiosityMesh) -> np.ndarray:
+    """(P, R) float64 dense W: patch radiosity as the area-weighted mean of its receivers."""
+    problem = _Problem.from_mesh(mesh)
+    matrix = np.zeros((mesh.patch_count, mesh.receiver_count))
+    rows = np.repeat(np.arange(mesh.receiver_count), np.diff(problem.receiver_ptr))
+    matrix[problem.entry_patch, rows] = problem.entry_weight
+    return matrix
+
+
 def new_state(mesh: RadiosityMesh, problem: _Problem | None = None) -> SolverState:
     """The state before any shot: patches hold their emission as unshot radiosity."""
     problem = problem or _Problem.from_mesh(mesh)
