@@ -1,4 +1,5 @@
-from raytrad.cli import main
 import sys
+
+from raytrad.cli import main
 
 sys.exit(main())

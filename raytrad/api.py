@@ -29,7 +29,7 @@ from raytrad.io.atomic import atomic_write
 from raytrad.io.loaders import load_scene
 from raytrad.io.ply import write_radiosity_ply
 from raytrad.mesh import MeshSettings, RadiosityMesh, build_mesh
-from raytrad.scene import Scene, has_emission
+from raytrad.scene import Scene, has_emission, triangle_areas_normals
 from raytrad.solver import SolveResult, SolverState, SolveSettings, solve
 from raytrad.visibility import Occluder, nothing_can_occlude
 
@@ -123,13 +123,22 @@ def prepare(scene: Scene, settings: RenderSettings | None = None) -> Prepared:
     """
     settings = settings or RenderSettings()
     timings: dict[str, float] = {}
-    with _timed(timings, "mesh"):
-        mesh = build_mesh(scene, settings.mesh)
     with _timed(timings, "acceleration"):
-        extent = float(np.ptp(mesh.positions, axis=0).max())
+        used = np.unique(scene.triangles)
+        extent = float(np.ptp(scene.positions[used], axis=0).max())
         occluder = None
         if not nothing_can_occlude(scene.positions, scene.triangles, 1e-7 * extent):
             occluder = Occluder(scene.positions, scene.triangles)
+    with _timed(timings, "mesh"):
+        enclosed = None
+        if occluder is not None:
+            _, normals = triangle_areas_normals(scene.triangle_vertices())
+            shut_in = occluder  # bound for the closure below
+
+            def enclosed(points: np.ndarray, point_normals: np.ndarray) -> np.ndarray:
+                return shut_in.enclosed(points, point_normals, normals, scene.double_sided)
+
+        mesh = build_mesh(scene, settings.mesh, enclosed)
     engine = FormFactorEngine(mesh, occluder, cache_bytes=int(settings.cache_mb * (1 << 20)))
     return Prepared(scene, mesh, engine, occluder, timings)
 
@@ -216,7 +225,7 @@ def _write_outputs(
     prepared: Prepared, result: SolveResult, output_dir: Path, stem: str, settings: RenderSettings
 ) -> dict[str, Path]:
     mesh = prepared.mesh
-    emitting = (mesh.receiver_emitted_exitance > 0).any(axis=1)
+    emitting = np.asarray((mesh.receiver_emitted_exitance > 0).any(axis=1))
     colors = display_colors(result.radiosity, emitting, settings.exposure)
     ply = output_dir / f"{stem}.ply"
     write_radiosity_ply(
@@ -248,7 +257,7 @@ def build_report(
         },
         "statistics": {
             "scene_triangles": prepared.scene.triangle_count,
-            "triangles": int(len(mesh.triangles)),
+            "triangles": len(mesh.triangles),
             "receivers": mesh.receiver_count,
             "patches": mesh.patch_count,
             "subareas": mesh.subarea_count,

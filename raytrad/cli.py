@@ -42,55 +42,128 @@ def build_parser() -> argparse.ArgumentParser:
         epilog="Units: scene coordinates in metres (see --scale); OBJ Kd = reflectance, "
         "Ke = emitted exitance [W m-2]; glTF emissive = radiance [W sr-1 m-2].",
     )
-    render.add_argument("scene", type=Path, metavar="SCENE",
-                        help="scene file: .obj (+.mtl), .gltf, .glb or .ply")
-    render.add_argument("-o", "--output", type=Path, default=Path("raytrad-out"), metavar="DIR",
-                        help="output directory (default: %(default)s)")
+    render.add_argument(
+        "scene", type=Path, metavar="SCENE", help="scene file: .obj (+.mtl), .gltf, .glb or .ply"
+    )
+    render.add_argument(
+        "-o",
+        "--output",
+        type=Path,
+        default=Path("raytrad-out"),
+        metavar="DIR",
+        help="output directory (default: %(default)s)",
+    )
     methods = ", ".join(f"{k}: {_METHOD_HELP.get(k, k)}" for k in SHOOTING_METHODS)
-    render.add_argument("--method", choices=list(SHOOTING_METHODS), default="ambient",
-                        help=f"solver ({methods}); default: %(default)s")
-    render.add_argument("--tolerance", type=float, default=1e-3,
-                        help="stop when the unshot power falls below this fraction of the "
-                        "emitted power (default: %(default)g)")
-    render.add_argument("--time-limit", type=float, default=None, metavar="SECONDS",
-                        help="stop solving after this many seconds")
-    render.add_argument("--max-shots", type=int, default=None, metavar="N",
-                        help="stop after N shots")
-    render.add_argument("--omega", type=float, default=1.3,
-                        help="overrelaxation factor for --method overrelaxation "
-                        "(default: %(default)s)")
+    render.add_argument(
+        "--method",
+        choices=list(SHOOTING_METHODS),
+        default="ambient",
+        help=f"solver ({methods}); default: %(default)s",
+    )
+    render.add_argument(
+        "--tolerance",
+        type=float,
+        default=1e-3,
+        help="stop when the unshot power falls below this fraction of the "
+        "emitted power (default: %(default)g)",
+    )
+    render.add_argument(
+        "--time-limit",
+        type=float,
+        default=None,
+        metavar="SECONDS",
+        help="stop solving after this many seconds",
+    )
+    render.add_argument(
+        "--max-shots", type=int, default=None, metavar="N", help="stop after N shots"
+    )
+    render.add_argument(
+        "--omega",
+        type=float,
+        default=1.3,
+        help="overrelaxation factor for --method overrelaxation (default: %(default)s)",
+    )
     defaults = MeshSettings()
-    render.add_argument("--receivers", type=int, default=defaults.receivers, metavar="N",
-                        help="target receiver (vertex) count; the mesh is refined to reach "
-                        "it (default: %(default)s)")
-    render.add_argument("--max-edge", type=float, default=None, metavar="METRES",
-                        help="refine until no edge is longer than this [m] "
-                        "(overrides --receivers)")
-    render.add_argument("--patches", type=int, default=defaults.patches, metavar="N",
-                        help="target shooting-patch count (default: %(default)s)")
-    render.add_argument("--patch-size", type=float, default=None, metavar="METRES",
-                        help="largest patch extent [m] (overrides --patches)")
-    render.add_argument("--samples", type=int, default=defaults.samples, metavar="N",
-                        help="visibility sample points per patch (default: %(default)s)")
-    render.add_argument("--emitter-samples", type=int, default=defaults.emitter_samples,
-                        metavar="N", help="sample points per emitting patch; more give "
-                        "smoother direct shadows (default: %(default)s)")
-    render.add_argument("--seed", type=int, default=0,
-                        help="seed of the sample points; same seed, same result "
-                        "(default: %(default)s)")
-    render.add_argument("--scale", type=float, default=1.0,
-                        help="multiply coordinates by this to get metres, e.g. 0.001 for "
-                        "millimetres (default: %(default)s)")
-    render.add_argument("--exposure", type=float, default=0.0, metavar="EV",
-                        help="brighten the PLY display colours by EV stops on top of the "
-                        "automatic exposure (default: %(default)s)")
-    render.add_argument("--cache-mb", type=float, default=1024.0, metavar="MIB",
-                        help="memory for reusing form factors between shots of a patch "
-                        "(default: %(default)s)")
-    render.add_argument("--resume", action="store_true",
-                        help="continue an interrupted run from its checkpoint in DIR")
-    render.add_argument("-q", "--quiet", action="store_true",
-                        help="no progress bar, only warnings and errors")
+    render.add_argument(
+        "--receivers",
+        type=int,
+        default=defaults.receivers,
+        metavar="N",
+        help="target receiver (vertex) count; the mesh is refined to reach "
+        "it (default: %(default)s)",
+    )
+    render.add_argument(
+        "--max-edge",
+        type=float,
+        default=None,
+        metavar="METRES",
+        help="refine until no edge is longer than this [m] (overrides --receivers)",
+    )
+    render.add_argument(
+        "--patches",
+        type=int,
+        default=defaults.patches,
+        metavar="N",
+        help="target shooting-patch count (default: %(default)s)",
+    )
+    render.add_argument(
+        "--patch-size",
+        type=float,
+        default=None,
+        metavar="METRES",
+        help="largest patch extent [m] (overrides --patches)",
+    )
+    render.add_argument(
+        "--samples",
+        type=int,
+        default=defaults.samples,
+        metavar="N",
+        help="visibility sample points per patch (default: %(default)s)",
+    )
+    render.add_argument(
+        "--emitter-samples",
+        type=int,
+        default=defaults.emitter_samples,
+        metavar="N",
+        help="sample points per emitting patch; more give "
+        "smoother direct shadows (default: %(default)s)",
+    )
+    render.add_argument(
+        "--seed",
+        type=int,
+        default=0,
+        help="seed of the sample points; same seed, same result (default: %(default)s)",
+    )
+    render.add_argument(
+        "--scale",
+        type=float,
+        default=1.0,
+        help="multiply coordinates by this to get metres, e.g. 0.001 for "
+        "millimetres (default: %(default)s)",
+    )
+    render.add_argument(
+        "--exposure",
+        type=float,
+        default=0.0,
+        metavar="EV",
+        help="brighten the PLY display colours by EV stops on top of the "
+        "automatic exposure (default: %(default)s)",
+    )
+    render.add_argument(
+        "--cache-mb",
+        type=float,
+        default=1024.0,
+        metavar="MIB",
+        help="memory for reusing form factors between shots of a patch (default: %(default)s)",
+    )
+    render.add_argument(
+        "--resume",
+        action="store_true",
+        help="continue an interrupted run from its checkpoint in DIR",
+    )
+    render.add_argument(
+        "-q", "--quiet", action="store_true", help="no progress bar, only warnings and errors"
+    )
     render.add_argument("-v", "--verbose", action="store_true", help="log details")
     return parser
 
@@ -203,6 +276,10 @@ def main(argv: Sequence[str] | None = None) -> int:
             return _render(args)
     except RaytradError as exc:
         print(f"raytrad: error: {exc}", file=sys.stderr)
+        return 1
+    except OSError as exc:  # unwritable output directory, full disk, ...
+        where = f"{exc.filename}: " if exc.filename else ""
+        print(f"raytrad: error: {where}{exc.strerror or exc}", file=sys.stderr)
         return 1
     except KeyboardInterrupt:
         print("raytrad: aborted", file=sys.stderr)

@@ -18,6 +18,7 @@ horizon) cost no ray.
 
 from __future__ import annotations
 
+import itertools
 import logging
 import math
 import threading
@@ -307,7 +308,7 @@ class FormFactorEngine:
         n_sub = max(1, self.mesh.patch_subareas(patch).stop - self.mesh.patch_subareas(patch).start)
         per_chunk = max(1, PAIRS_PER_CHUNK // max(n_sub, self._edge_count(patch)))
         bounds = [*range(0, len(x), per_chunk), len(x)]
-        spans = list(zip(bounds[:-1], bounds[1:], strict=True))
+        spans = list(itertools.pairwise(bounds))
 
         def work(span: tuple[int, int]) -> tuple[np.ndarray, int]:
             a, b = span
@@ -362,7 +363,8 @@ class FormFactorEngine:
         blocked = self._blocked(origins[who], targets)
         total = weight.sum(axis=1) + np.bincount(near_c, weights=near_w, minlength=len(x))
         hidden = np.bincount(
-            who, weights=np.concatenate([weight[far_c, far_s], near_w]) * blocked,
+            who,
+            weights=np.concatenate([weight[far_c, far_s], near_w]) * blocked,
             minlength=len(x),
         )
         visible = np.where(total > 0, 1.0 - hidden / np.where(total > 0, total, 1.0), 0.0)
@@ -371,9 +373,9 @@ class FormFactorEngine:
     def _unoccluded(self, x: np.ndarray, nx: np.ndarray, patch: int) -> np.ndarray:
         """Exact unoccluded F(receiver <- patch).
 
-        Where the whole patch lies above the receiver's horizon, Lambert's formula is a sum
-        over the patch's boundary edges alone (interior edges cancel); otherwise each
-        triangle is clipped to the horizon and summed.
+        Where a planar patch lies wholly above the receiver's horizon, Lambert's formula is
+        a sum over the patch's boundary edges alone (interior edges cancel); otherwise each
+        triangle facing the receiver is clipped to the horizon and summed.
         """
         m = self.mesh
         lo, hi = self._vert_ptr[patch], self._vert_ptr[patch + 1]
@@ -381,7 +383,10 @@ class FormFactorEngine:
         height = verts @ nx.T - np.einsum("cj,cj->c", x, nx)[None, :]  # (Vp, C)
         band = 1e-9 * self.diagonal
         top = height.max(axis=0)
-        above = (height.min(axis=0) >= -band) & (top > band)
+        # The boundary-contour sum is exact only for a planar patch: seen from a receiver
+        # on a folded patch (a warped quad's two triangles) it would count the fold's own
+        # surface as a full hemisphere. Folded patches go triangle by triangle.
+        above = (height.min(axis=0) >= -band) & (top > band) & bool(m.patch_planar[patch])
         out = np.zeros(len(x))
         if above.any():
             a, b = self._edge_ptr[patch], self._edge_ptr[patch + 1]

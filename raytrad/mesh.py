@@ -15,10 +15,12 @@ from __future__ import annotations
 
 import logging
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
 
+from raytrad.errors import SceneError
 from raytrad.scene import Scene, triangle_areas_normals
 
 log = logging.getLogger(__name__)
@@ -267,7 +269,7 @@ def surface_labels(
     (T,) int64 surface label per triangle.
     """
     _, normals = triangle_areas_normals(positions[triangles])
-    edges, tri_edges = _unique_edges(triangles)
+    _edges, tri_edges = _unique_edges(triangles)
     owner = np.repeat(np.arange(len(triangles)), 3)
     order = np.argsort(tri_edges.reshape(-1), kind="stable")
     sorted_edges = tri_edges.reshape(-1)[order]
@@ -297,7 +299,7 @@ def _cluster_bounds(points: np.ndarray, labels: np.ndarray, count: int) -> tuple
 def bisect_clusters(
     centroids: np.ndarray,
     labels: np.ndarray,
-    split: callable,  # type: ignore[valid-type]
+    split: Callable[[np.ndarray, np.ndarray], np.ndarray],
     max_rounds: int = 64,
 ) -> np.ndarray:
     """Split clusters of points in half along their longest axis while ``split`` asks.
@@ -327,9 +329,7 @@ def bisect_clusters(
         axis = np.argmax(extent, axis=1)
         middle = 0.5 * (lo + hi)[np.arange(count), axis]
         item_axis = axis[labels]
-        upper = want[labels] & (
-            centroids[np.arange(len(labels)), item_axis] > middle[labels]
-        )
+        upper = want[labels] & (centroids[np.arange(len(labels)), item_axis] > middle[labels])
         new_label = count + np.cumsum(want) - 1
         labels = np.where(upper, new_label[labels], labels)
         labels = np.unique(labels, return_inverse=True)[1].reshape(-1)
@@ -381,8 +381,23 @@ class MeshSettings:
     seed: int = 0
 
 
-def build_mesh(scene: Scene, settings: MeshSettings | None = None) -> RadiosityMesh:
-    """Refine ``scene`` and build receivers, patches and sub-areas (see module docstring)."""
+def build_mesh(
+    scene: Scene,
+    settings: MeshSettings | None = None,
+    enclosed: Callable[[np.ndarray, np.ndarray], np.ndarray] | None = None,
+) -> RadiosityMesh:
+    """Refine ``scene`` and build receivers, patches and sub-areas (see module docstring).
+
+    Parameters
+    ----------
+    scene : Scene
+    settings : MeshSettings
+    enclosed : callable or None
+        ``enclosed(points, normals) -> (N,) bool``: True where a surface point can neither
+        see nor be seen (the floor under a block standing on it). Refined triangles whose
+        centroid is enclosed are left out: otherwise a patch half under the block would
+        average its lit half with the dark half and shoot too little.
+    """
     settings = settings or MeshSettings()
     positions, triangles, material = _surface_triangles(scene)
     base_area, _ = triangle_areas_normals(positions[triangles])
@@ -393,8 +408,18 @@ def build_mesh(scene: Scene, settings: MeshSettings | None = None) -> RadiosityM
     fine_surface = surface[parent]
     area, normal = triangle_areas_normals(positions[fine])
     keep = area > 0
+    if enclosed is not None:
+        keep &= ~enclosed(positions[fine].mean(axis=1), normal)
+        if not keep.any():
+            raise SceneError(scene.source, "no surface can see any other (all enclosed)")
+        if (~keep).any():
+            log.info("left out %d enclosed triangles", int((~keep).sum()))
     fine, parent, fine_surface, area, normal = (
-        fine[keep], parent[keep], fine_surface[keep], area[keep], normal[keep]
+        fine[keep],
+        parent[keep],
+        fine_surface[keep],
+        area[keep],
+        normal[keep],
     )
     receivers = _receivers(positions, fine, fine_surface, area, normal)
     triangle_receivers, r_pos, r_normal, r_area, r_inward = receivers
@@ -413,8 +438,22 @@ def build_mesh(scene: Scene, settings: MeshSettings | None = None) -> RadiosityM
 
     mesh_source = _source_index(scene, parent)
     return _assemble(
-        scene, positions, fine, area, normal, tri_material, mesh_source, patch, subarea,
-        triangle_receivers, r_pos, r_normal, r_area, r_inward, r_material, settings.seed,
+        scene,
+        positions,
+        fine,
+        area,
+        normal,
+        tri_material,
+        mesh_source,
+        patch,
+        subarea,
+        triangle_receivers,
+        r_pos,
+        r_normal,
+        r_area,
+        r_inward,
+        r_material,
+        settings.seed,
     )
 
 
@@ -517,25 +556,27 @@ def _assemble(
     corners = positions[triangles]
     centroid = corners.mean(axis=1)
     p_area = np.bincount(patch, weights=area, minlength=p_count)
-    p_center = np.stack(
-        [np.bincount(patch, weights=centroid[:, k] * area, minlength=p_count) for k in range(3)],
-        axis=1,
-    ) / p_area[:, None]
+    p_center = (
+        np.stack(
+            [
+                np.bincount(patch, weights=centroid[:, k] * area, minlength=p_count)
+                for k in range(3)
+            ],
+            axis=1,
+        )
+        / p_area[:, None]
+    )
     p_normal_sum = np.stack(
         [np.bincount(patch, weights=normal[:, k] * area, minlength=p_count) for k in range(3)],
         axis=1,
     )
     p_normal = p_normal_sum / np.maximum(np.linalg.norm(p_normal_sum, axis=1), 1e-300)[:, None]
     planar = np.ones(p_count, dtype=bool)
-    np.logical_and.at(
-        planar, patch, np.einsum("ij,ij->i", normal, p_normal[patch]) > 1.0 - 1e-9
-    )
+    np.logical_and.at(planar, patch, np.einsum("ij,ij->i", normal, p_normal[patch]) > 1.0 - 1e-9)
     corner_dist = np.linalg.norm(corners - p_center[patch][:, None, :], axis=2).max(axis=1)
     p_radius = np.zeros(p_count)
     np.maximum.at(p_radius, patch, corner_dist)
-    p_reflectance = scene.material_reflectance[
-        tri_material[np.unique(patch, return_index=True)[1]]
-    ]
+    p_reflectance = scene.material_reflectance[tri_material[np.unique(patch, return_index=True)[1]]]
 
     s_patch = np.zeros(s_count, dtype=np.int64)
     s_patch[subarea] = patch

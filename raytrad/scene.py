@@ -75,7 +75,9 @@ class Scene:
         return np.asarray(self.positions[self.triangles])
 
     def scaled(self, factor: float) -> Scene:
-        """The same scene with positions multiplied by ``factor`` (unit conversion)."""
+        """The same scene with positions multiplied by ``factor`` > 0 (unit conversion)."""
+        if not (np.isfinite(factor) and factor > 0):
+            raise SceneError(self.source, f"scale must be a positive number, got {factor}")
         return replace(self, positions=self.positions * float(factor))
 
 
@@ -124,7 +126,34 @@ def make_scene(
     m = len(names)
     if material_double_sided is None:
         material_double_sided = np.zeros(m, dtype=bool)
-    scene = Scene(
+    try:
+        scene = _scene_from_arrays(
+            positions,
+            triangles,
+            material_index,
+            names,
+            material_reflectance,
+            material_emitted_exitance,
+            material_double_sided,
+            source,
+        )
+    except ValueError as exc:
+        raise SceneError(source, f"malformed scene arrays ({exc})") from exc
+    return validate_scene(scene)
+
+
+def _scene_from_arrays(
+    positions: np.ndarray,
+    triangles: np.ndarray,
+    material_index: np.ndarray,
+    names: tuple[str, ...],
+    material_reflectance: np.ndarray,
+    material_emitted_exitance: np.ndarray,
+    material_double_sided: np.ndarray,
+    source: str | Path | None,
+) -> Scene:
+    m = len(names)
+    return Scene(
         positions=np.asarray(positions, dtype=np.float64).reshape(-1, 3),
         triangles=np.asarray(triangles, dtype=np.int64).reshape(-1, 3),
         material_index=np.asarray(material_index, dtype=np.int64).reshape(-1),
@@ -136,7 +165,6 @@ def make_scene(
         material_double_sided=np.asarray(material_double_sided, dtype=bool).reshape(m),
         source=None if source is None else Path(source),
     )
-    return validate_scene(scene)
 
 
 def validate_scene(scene: Scene) -> Scene:
@@ -165,8 +193,9 @@ def validate_scene(scene: Scene) -> Scene:
     bad = ~np.isfinite(scene.positions[used]).all(axis=1)
     if bad.any():
         raise SceneError(
-            src, f"{int(bad.sum())} vertices have NaN or infinite coordinates "
-            f"(first: vertex {int(used[bad][0])})"
+            src,
+            f"{int(bad.sum())} vertices have NaN or infinite coordinates "
+            f"(first: vertex {int(used[bad][0])})",
         )
     nm = len(scene.material_names)
     if scene.material_index.min() < 0 or scene.material_index.max() >= nm:
@@ -182,16 +211,16 @@ def validate_scene(scene: Scene) -> Scene:
             raise SceneError(
                 src, f"material {name!r}: emission {emission.tolist()} must be finite and >= 0"
             )
-    areas, _ = triangle_areas_normals(scene.triangle_vertices())
-    extent = float(np.ptp(scene.positions[used], axis=0).max())
-    # A triangle is degenerate when its area is lost in float64 rounding at the scene's size.
-    degenerate = areas <= (extent * extent) * 1e-14
+    corners = scene.triangle_vertices()
+    areas, _ = triangle_areas_normals(corners)
+    longest = np.linalg.norm(corners - np.roll(corners, 1, axis=1), axis=2).max(axis=1)
+    # Degenerate: no area, or an area lost in float64 rounding of its own edge lengths
+    # (collinear corners). Slivers of aspect 1e6 and tiny triangles in huge scenes stay.
+    degenerate = areas <= 1e-13 * longest * longest
     if degenerate.all():
         raise SceneError(src, "every face has zero area")
     if degenerate.any():
-        log.warning(
-            "%s: dropped %d zero-area triangles", src or "<scene>", int(degenerate.sum())
-        )
+        log.warning("%s: dropped %d zero-area triangles", src or "<scene>", int(degenerate.sum()))
         keep = ~degenerate
         scene = replace(
             scene, triangles=scene.triangles[keep], material_index=scene.material_index[keep]

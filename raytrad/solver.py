@@ -160,7 +160,9 @@ class SolveResult:
 ShootAmount = Callable[["_Problem", SolverState, SolveSettings], np.ndarray]
 
 
-def _progressive_amount(problem: _Problem, state: SolverState, settings: SolveSettings) -> np.ndarray:
+def _progressive_amount(
+    problem: _Problem, state: SolverState, settings: SolveSettings
+) -> np.ndarray:
     return state.unshot
 
 
@@ -176,7 +178,9 @@ def _ambient_amount(problem: _Problem, state: SolverState, settings: SolveSettin
     area = problem.patch_area
     unshot_power = area @ unshot  # (3,)
     known = np.isfinite(state.captured)
-    mean_capture = float(np.average(state.captured[known], weights=area[known])) if known.any() else 1.0
+    mean_capture = 1.0
+    if known.any():
+        mean_capture = float(np.average(state.captured[known], weights=area[known]))
     capture = np.where(known, state.captured, mean_capture)
     lost = area @ (1.0 - problem.patch_reflectance * capture[:, None])  # (3,)
     ambient = unshot_power / np.maximum(lost, 1e-300 * area.sum())  # formula 3
@@ -360,7 +364,9 @@ def solve(
     )
 
 
-def _stop_reason(state: SolverState, settings: SolveSettings, residual: float, elapsed: float) -> str:
+def _stop_reason(
+    state: SolverState, settings: SolveSettings, residual: float, elapsed: float
+) -> str:
     if residual <= settings.tolerance:
         return "converged"
     if settings.max_shots is not None and state.shots >= settings.max_shots:

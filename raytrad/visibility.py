@@ -7,8 +7,11 @@ precision as one at the origin; every query point goes through the same shift.
 
 from __future__ import annotations
 
+import itertools
 import logging
+import math
 import os
+import threading
 from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
@@ -59,11 +62,14 @@ class Occluder:
         TriangleMesh(self._scene, local, np.ascontiguousarray(triangles, dtype=np.int32))
         self._workers = worker_count()
         self._pool: ThreadPoolExecutor | None = None
+        self._lock = threading.Lock()
         self.rays_cast = 0
         # the first query commits (builds) the BVH; do it now so timings are honest
         self._scene.run(
-            np.zeros((1, 3), np.float32), np.full((1, 3), 3.0**-0.5, np.float32),
-            dists=np.zeros(1, np.float32), query="OCCLUDED",
+            np.zeros((1, 3), np.float32),
+            np.full((1, 3), 3.0**-0.5, np.float32),
+            dists=np.zeros(1, np.float32),
+            query="OCCLUDED",
         )
 
     def close(self) -> None:
@@ -100,7 +106,8 @@ class Occluder:
         (N,) bool, True where something blocks the open segment.
         """
         n = len(origins)
-        self.rays_cast += n
+        with self._lock:
+            self.rays_cast += n
         if n == 0:
             return np.zeros(0, dtype=bool)
         o = np.ascontiguousarray(origins, dtype=np.float32)
@@ -108,12 +115,12 @@ class Occluder:
         t = np.ascontiguousarray(distances, dtype=np.float32)
         if n <= RAY_CHUNK or self._workers == 1:
             return self._run(o, d, t)
-        bounds = list(range(0, n, RAY_CHUNK)) + [n]
+        bounds = [*list(range(0, n, RAY_CHUNK)), n]
         if self._pool is None:
             self._pool = ThreadPoolExecutor(self._workers, thread_name_prefix="raytrad-rays")
         parts = self._pool.map(
-            lambda ab: self._run(o[ab[0]:ab[1]], d[ab[0]:ab[1]], t[ab[0]:ab[1]]),
-            zip(bounds[:-1], bounds[1:], strict=True),
+            lambda ab: self._run(o[ab[0] : ab[1]], d[ab[0] : ab[1]], t[ab[0] : ab[1]]),
+            itertools.pairwise(bounds),
         )
         return np.concatenate(list(parts))
 
@@ -121,10 +128,93 @@ class Occluder:
         out = np.empty(len(o), dtype=bool)
         for start in range(0, len(o), RAY_CHUNK):
             stop = start + RAY_CHUNK
-            hit = self._scene.run(o[start:stop], d[start:stop], dists=t[start:stop].copy(),
-                                  query="OCCLUDED")
+            hit = self._scene.run(
+                o[start:stop], d[start:stop], dists=t[start:stop].copy(), query="OCCLUDED"
+            )
             out[start:stop] = np.asarray(hit) != -1
         return out
+
+    def intersect_local(
+        self, origins: np.ndarray, directions: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Closest hits of rays in the local frame.
+
+        Parameters
+        ----------
+        origins : (N, 3) float
+            Ray origins in the local frame [m].
+        directions : (N, 3) float
+            Unit directions.
+
+        Returns
+        -------
+        triangle : (N,) int64, index of the triangle hit, -1 for a miss
+        distance : (N,) float64, distance to the hit [m] (inf for a miss)
+        """
+        o = np.ascontiguousarray(origins, dtype=np.float32)
+        d = np.ascontiguousarray(directions, dtype=np.float32)
+        with self._lock:
+            self.rays_cast += len(o)
+        triangle = np.empty(len(o), dtype=np.int64)
+        distance = np.empty(len(o))
+        for start in range(0, len(o), RAY_CHUNK):
+            stop = start + RAY_CHUNK
+            hit = self._scene.run(o[start:stop], d[start:stop], query="INTERSECT", output=True)
+            triangle[start:stop] = hit["primID"]
+            distance[start:stop] = np.where(hit["primID"] >= 0, hit["tfar"], np.inf)
+        return triangle, distance
+
+    def enclosed(
+        self,
+        points: np.ndarray,
+        normals: np.ndarray,
+        triangle_normals: np.ndarray,
+        double_sided: np.ndarray,
+        rays: int = 16,
+    ) -> np.ndarray:
+        """Which surface points are shut in: every ray from them hits a back face.
+
+        A floor point under a closed block sees only the block's inside (the backs of its
+        single-sided faces) in every direction: it can neither receive nor send light.
+
+        Parameters
+        ----------
+        points : (N, 3) float64
+            World points [m] on surfaces.
+        normals : (N, 3) float64
+            Their unit normals.
+        triangle_normals : (T, 3) float64
+            Unit normals of this occluder's triangles.
+        double_sided : (T,) bool
+            Triangles that have no back.
+        rays : int
+            Directions tried per point (a fixed stratified cosine set).
+
+        Returns
+        -------
+        (N,) bool
+        """
+        directions = _fibonacci_hemisphere(rays)  # (K, 3) about +z
+        inside = np.ones(len(points), dtype=bool)
+        origin = self.to_local(points) + 1e-6 * self.diagonal * normals
+        tangent, bitangent = _frames(normals)
+        for k in range(rays):
+            d = (
+                directions[k, 0] * tangent
+                + directions[k, 1] * bitangent
+                + directions[k, 2] * normals
+            )
+            todo = np.nonzero(inside)[0]
+            if len(todo) == 0:
+                break
+            hit, _ = self.intersect_local(origin[todo], d[todo])
+            ok = hit >= 0
+            back = np.zeros(len(todo), dtype=bool)
+            back[ok] = (np.einsum("ij,ij->i", triangle_normals[hit[ok]], d[todo][ok]) > 0) & (
+                ~double_sided[hit[ok]]
+            )
+            inside[todo[~back]] = False
+        return inside
 
     def occluded(self, starts: np.ndarray, ends: np.ndarray) -> np.ndarray:
         """(N,) bool: is the open segment between world points ``starts`` and ``ends`` blocked?
@@ -168,3 +258,21 @@ def nothing_can_occlude(positions: np.ndarray, triangles: np.ndarray, tolerance:
         if (signed < -tolerance).any():
             return False
     return True
+
+
+def _fibonacci_hemisphere(count: int) -> np.ndarray:
+    """(count, 3) unit directions spread evenly over the +z hemisphere, cosine-weighted."""
+    i = np.arange(count) + 0.5
+    radius = np.sqrt(i / count)
+    angle = i * math.pi * (3.0 - math.sqrt(5.0))
+    return np.stack(
+        [radius * np.cos(angle), radius * np.sin(angle), np.sqrt(1.0 - radius**2)], axis=1
+    )
+
+
+def _frames(normals: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Two unit tangents completing each (N, 3) unit normal to an orthonormal frame."""
+    helper = np.where(np.abs(normals[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
+    tangent = np.cross(normals, helper)
+    tangent /= np.linalg.norm(tangent, axis=1)[:, None]
+    return tangent, np.cross(normals, tangent)

@@ -93,10 +93,16 @@ def run(receivers: int, method: str, tolerance: float) -> dict[str, float | int 
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--receivers", default="20000,100000",
-                        help="comma-separated target receiver counts (default: %(default)s)")
-    parser.add_argument("--methods", default=",".join(SHOOTING_METHODS),
-                        help="comma-separated methods (default: %(default)s)")
+    parser.add_argument(
+        "--receivers",
+        default="20000,100000",
+        help="comma-separated target receiver counts (default: %(default)s)",
+    )
+    parser.add_argument(
+        "--methods",
+        default=",".join(SHOOTING_METHODS),
+        help="comma-separated methods (default: %(default)s)",
+    )
     parser.add_argument("--tolerance", type=float, default=1e-3)
     args = parser.parse_args(argv)
     header = (
