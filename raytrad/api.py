@@ -206,8 +206,8 @@ def render(
             result = solve(prepared.mesh, prepared.engine, settings.solve, state, on_shot, stop)
         with _timed(timings, "write"):
             outputs = _write_outputs(prepared, result, output_dir, stem, settings)
-        if result.stop_reason == "interrupted":
-            save_checkpoint(checkpoint, result.state, key)
+        if result.stop_reason in ("interrupted", "time-limit", "max-shots"):
+            save_checkpoint(checkpoint, result.state, key)  # --resume continues from here
             outputs["checkpoint"] = checkpoint
         elif checkpoint.exists():
             checkpoint.unlink()

@@ -144,6 +144,25 @@ def polygon_form_factor(
     return out
 
 
+def _visible_centroid(
+    polygons: np.ndarray, points: np.ndarray, normals: np.ndarray
+) -> np.ndarray:
+    """(N, 3) mean corner of each triangle's part above the receiver's horizon [m].
+
+    A triangle straddling the horizon (the floor running under a block, seen from the
+    block's side) is aimed at in its visible part, not at a centroid behind the block.
+    """
+    height = np.einsum("nkj,nj->nk", polygons - points[:, None, :], normals)
+    target = polygons.mean(axis=1)
+    part = ~(height >= 0).all(axis=1)
+    if part.any():
+        clipped, count = clip_to_horizon(polygons[part], points[part], normals[part])
+        valid = np.arange(4)[None, :] < count[:, None]
+        total = (clipped * valid[:, :, None]).sum(axis=1)
+        target[part] = total / np.maximum(count, 1)[:, None]
+    return target
+
+
 def _lambert(polygons: np.ndarray, points: np.ndarray, normals: np.ndarray) -> np.ndarray:
     """Lambert's formula for (N, k, 3) polygons wholly above each receiver's horizon."""
     d = polygons - points[:, None, :]
@@ -231,7 +250,10 @@ class FormFactorEngine:
             mesh.triangle_subarea[order], np.arange(mesh.subarea_count + 1)
         )
         self._tri_corners = mesh.positions[mesh.triangles]
-        self._tri_centroid = self._tri_corners.mean(axis=1)
+        # Ray targets sit RAY_OFFSET off their surface on its lit side: a ray ending a
+        # margin short of a point *on* the surface would, at grazing angles, end closer to
+        # the surface than float32 resolves, and hit the very surface it aims at.
+        self._sub_target = mesh.subarea_point + RAY_OFFSET * diag * mesh.subarea_normal
         self._patch_tri, self._patch_tri_ptr = _group(mesh.triangle_patch, mesh.patch_count)
         self._vert_index, self._vert_ptr = _patch_vertices(mesh)
         self._edge_start, self._edge_end, self._edge_ptr = _boundary_edges(mesh)
@@ -357,8 +379,8 @@ class FormFactorEngine:
         far &= sees[:, None]
         weight = np.where(far, disk_form_factor(cos_r, cos_s, r2, m.subarea_area[sub]), 0.0)
         far_c, far_s = np.nonzero(far)
-        near_c, near_t, near_w = self._near_field(x, nx, near, sub)
-        targets = np.concatenate([y[far_s], self._tri_centroid[near_t]])
+        near_c, near_target, near_w = self._near_field(x, nx, near, sub)
+        targets = np.concatenate([self._sub_target[sub][far_s], near_target])
         who = np.concatenate([far_c, near_c])
         blocked = self._blocked(origins[who], targets)
         total = weight.sum(axis=1) + np.bincount(near_c, weights=near_w, minlength=len(x))
@@ -387,6 +409,10 @@ class FormFactorEngine:
         # on a folded patch (a warped quad's two triangles) it would count the fold's own
         # surface as a full hemisphere. Folded patches go triangle by triangle.
         above = (height.min(axis=0) >= -band) & (top > band) & bool(m.patch_planar[patch])
+        if m.patch_planar[patch]:  # nothing reaches the back of a one-sided patch
+            facing = (x - m.patch_center[patch]) @ m.patch_normal[patch] > band
+            above &= facing
+            top = np.where(facing, top, -np.inf)
         out = np.zeros(len(x))
         if above.any():
             a, b = self._edge_ptr[patch], self._edge_ptr[patch + 1]
@@ -424,13 +450,13 @@ class FormFactorEngine:
         Returns
         -------
         chunk_receiver : (K,) int64, index into the chunk
-        triangle : (K,) int64
-        factor : (K,) float64, unoccluded exact factors (> 0 only)
+        target : (K, 3) float64, ray target: the centroid of the part of the triangle above
+            the receiver's horizon, lifted off the surface [m]
+        weight : (K,) float64, unoccluded exact factors (> 0 only)
         """
         c, s = np.nonzero(near)
         if len(c) == 0:
-            empty = np.zeros(0, np.int64)
-            return empty, empty, np.zeros(0)
+            return np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros(0)
         s_global = s + sub.start
         start, stop = self._sub_ptr[s_global], self._sub_ptr[s_global + 1]
         counts = stop - start
@@ -440,14 +466,17 @@ class FormFactorEngine:
         cc = c[pair]
         f = self._triangle_factors(x[cc], nx[cc], tri)
         keep = f > 0
-        return cc[keep], tri[keep], f[keep]
+        cc, tri = cc[keep], tri[keep]
+        target = _visible_centroid(self._tri_corners[tri], x[cc], nx[cc])
+        target += RAY_OFFSET * self.diagonal * self.mesh.triangle_normal[tri]
+        return cc, target, f[keep]
 
     def _blocked(self, origins: np.ndarray, targets: np.ndarray) -> np.ndarray:
         assert self.occluder is not None
         delta = targets - origins
         length = np.linalg.norm(delta, axis=1)
         direction = delta / np.where(length > 0, length, 1.0)[:, None]
-        reach = np.maximum(length - RAY_OFFSET * self.diagonal, 0.0)
+        reach = np.maximum(length - 0.5 * RAY_OFFSET * self.diagonal, 0.0)
         return self.occluder.occluded_local(self.occluder.to_local(origins), direction, reach)
 
 

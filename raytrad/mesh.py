@@ -409,7 +409,7 @@ def build_mesh(
     area, normal = triangle_areas_normals(positions[fine])
     keep = area > 0
     if enclosed is not None:
-        keep &= ~enclosed(positions[fine].mean(axis=1), normal)
+        keep &= ~_enclosed_triangles(positions[fine], normal, enclosed)
         if not keep.any():
             raise SceneError(scene.source, "no surface can see any other (all enclosed)")
         if (~keep).any():
@@ -455,6 +455,23 @@ def build_mesh(
         r_material,
         settings.seed,
     )
+
+
+def _enclosed_triangles(
+    corners: np.ndarray,
+    normals: np.ndarray,
+    enclosed: Callable[[np.ndarray, np.ndarray], np.ndarray],
+) -> np.ndarray:
+    """(T,) bool: triangles whose centroid and near-corner points are all enclosed."""
+    centroid = corners.mean(axis=1)
+    shut = enclosed(centroid, normals)
+    for k in range(3):
+        todo = np.nonzero(shut)[0]
+        if len(todo) == 0:
+            break
+        near_corner = 0.9 * corners[todo, k] + 0.1 * centroid[todo]
+        shut[todo] = enclosed(near_corner, normals[todo])
+    return shut
 
 
 def _surface_triangles(scene: Scene) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

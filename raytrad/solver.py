@@ -278,13 +278,16 @@ def new_state(mesh: RadiosityMesh, problem: _Problem | None = None) -> SolverSta
 def check_solvable(mesh: RadiosityMesh) -> None:
     """Refuse systems without a finite solution before any work.
 
-    Reflectance 1 in every channel of every patch of a scene with emission means energy is
-    never lost in a closed scene: the radiosity grows without bound.
+    In a channel where every patch reflects everything (reflectance 1) and something
+    emits, no energy is ever lost in a closed scene: the radiosity grows without bound.
     """
-    if (mesh.patch_reflectance >= 1.0).all() and (mesh.receiver_emitted_exitance > 0).any():
+    emits = (mesh.receiver_emitted_exitance > 0).any(axis=0).tolist()
+    lossless = (mesh.patch_reflectance >= 1.0).all(axis=0).tolist()
+    bad = [name for name, e, l in zip("RGB", emits, lossless, strict=True) if e and l]
+    if bad:
         raise SolverError(
-            "every surface has reflectance 1: a closed scene then has no finite solution "
-            "(lower the reflectance below 1)"
+            f"every surface has reflectance 1 in channel {', '.join(bad)}: a closed scene "
+            "then has no finite solution (lower the reflectance below 1)"
         )
 
 

@@ -216,12 +216,27 @@ class Occluder:
             inside[todo[~back]] = False
         return inside
 
-    def occluded(self, starts: np.ndarray, ends: np.ndarray) -> np.ndarray:
+    def occluded(
+        self, starts: np.ndarray, ends: np.ndarray, end_normals: np.ndarray | None = None
+    ) -> np.ndarray:
         """(N,) bool: is the open segment between world points ``starts`` and ``ends`` blocked?
 
-        Only the interior of the segment counts: a relative margin of 1e-6 of the scene
-        diagonal is left free at the end, so the target surface itself never blocks.
+        Parameters
+        ----------
+        starts, ends : (N, 3) float64
+            Segment end points [m].
+        end_normals : (N, 3) float64 or None
+            Unit normals of the surfaces the segments end on, on the side they arrive from.
+            Give them whenever ``ends`` lie on a surface: each end is then lifted off it by
+            1e-5 of the scene diagonal, so a grazing segment is not blocked by the very
+            surface it ends on (float32 cannot resolve a margin taken along the segment).
+
+        Only the interior of the segment counts: a margin of 1e-6 of the scene diagonal is
+        left free at the end.
         """
+        ends = np.asarray(ends, dtype=np.float64)
+        if end_normals is not None:
+            ends = ends + 1e-5 * self.diagonal * np.asarray(end_normals, dtype=np.float64)
         a = self.to_local(starts)
         delta = self.to_local(ends) - a
         length = np.linalg.norm(delta, axis=1)

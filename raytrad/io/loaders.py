@@ -205,6 +205,11 @@ def _add_trimesh_scene(
         geometry = tm_scene.geometry.get(geometry_name)
         if not isinstance(geometry, trimesh.Trimesh) or len(geometry.faces) == 0:
             continue
+        if geometry.vertices.ndim != 2 or geometry.vertices.shape[1] != 3:
+            raise SceneError(
+                collected.path,
+                f"vertices must have 3 coordinates, found {geometry.vertices.shape[-1]}",
+            )
         vertices, local = _compact(geometry.vertices, geometry.faces)
         transform = np.asarray(matrix, dtype=np.float64)
         with np.errstate(invalid="ignore", over="ignore"):  # non-finite input is reported later

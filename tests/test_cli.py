@@ -1,0 +1,233 @@
+"""The command line and the render API: outputs, one-line errors, exit status, resuming."""
+
+from __future__ import annotations
+
+import itertools
+import json
+import logging
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from raytrad import api
+from raytrad.cli import main
+from raytrad.io.ply import read_radiosity_ply
+from raytrad.mesh import MeshSettings
+from raytrad.scenes import cornell_box, write_obj
+from raytrad.solver import SHOOTING_METHODS, SolveSettings
+
+from .conftest import SCENES
+
+FURNACE_OBJ = SCENES / "furnace.obj"  # unit cube, Kd 0.5, Ke 1: B = 2 everywhere
+SMALL = ["--receivers", "800", "--patches", "60", "-q"]
+TRIANGLE = "v 0 0 0\nv 1 0 0\nv 0 1 0\n"
+
+
+def run(argv: list[str], capsys: pytest.CaptureFixture[str]) -> tuple[int, str, str]:
+    """``raytrad.cli.main(argv)`` in-process: (exit status, stdout, stderr)."""
+    try:
+        status = main(argv)
+    except SystemExit as exc:  # argparse errors and --help
+        status = exc.code if isinstance(exc.code, int) else 1
+    captured = capsys.readouterr()
+    return status, captured.out, captured.err
+
+
+def _ledger_balances(energy: dict[str, list[float]]) -> bool:
+    emitted = np.array(energy["emitted"])
+    total = np.array(energy["absorbed"]) + np.array(energy["escaped"]) + np.array(energy["unshot"])
+    return bool(np.allclose(total, emitted, rtol=1e-9, atol=0))
+
+
+def test_render_furnace(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    out = tmp_path / "out"
+    status, _, err = run(["render", str(FURNACE_OBJ), "-o", str(out), *SMALL], capsys)
+    assert status == 0, err
+    positions, triangles, radiosity = read_radiosity_ply(out / "furnace.ply")
+    assert len(positions) > 500 and len(triangles) > 500
+    np.testing.assert_allclose(radiosity, 2.0, rtol=1e-2)
+    report = json.loads((out / "report.json").read_text())
+    assert report["solve"]["stop_reason"] == "converged"
+    assert report["solve"]["residual"] <= 1e-3
+    assert report["statistics"]["receivers"] == len(positions)
+    assert report["energy_watts"]["emitted"] == pytest.approx([6.0, 6.0, 6.0], rel=1e-12)
+    assert _ledger_balances(report["energy_watts"])
+    # nothing written but the results (no temporary files, no checkpoint)
+    assert sorted(p.name for p in out.iterdir()) == ["furnace.ply", "report.json"]
+
+
+def test_max_shots_stops_early_and_says_so(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    out = tmp_path / "out"
+    status, _, err = run(
+        ["render", str(FURNACE_OBJ), "-o", str(out), "--max-shots", "3", *SMALL], capsys
+    )
+    assert status == 0, err
+    report = json.loads((out / "report.json").read_text())
+    assert report["solve"]["stop_reason"] == "max-shots"
+    assert report["solve"]["shots"] == 3
+    assert report["solve"]["residual"] > 1e-3
+    assert _ledger_balances(report["energy_watts"])
+    _, _, radiosity = read_radiosity_ply(out / "furnace.ply")
+    assert radiosity.max() < 2.0  # three shots are not the converged 2.0
+
+
+def test_python_dash_m_exit_status(tmp_path: Path) -> None:
+    def raytrad(*args: str) -> subprocess.CompletedProcess[str]:
+        return subprocess.run(
+            [sys.executable, "-m", "raytrad", "render", *args],
+            capture_output=True,
+            text=True,
+            timeout=120,
+        )
+
+    good = raytrad(str(FURNACE_OBJ), "-o", str(tmp_path / "good"), *SMALL)
+    assert good.returncode == 0, good.stderr
+    assert (tmp_path / "good" / "furnace.ply").is_file()
+    missing = tmp_path / "missing.obj"
+    bad = raytrad(str(missing), "-o", str(tmp_path / "bad"), "-q")
+    assert bad.returncode == 1
+    assert bad.stderr.strip().splitlines() == [f"raytrad: error: {missing}: file not found"]
+
+
+BAD_INPUTS = {
+    "missing.obj": None,
+    "scene.stl": "solid nothing\nendsolid nothing\n",
+    "garbage.obj": "this is not a mesh\nat all\n",
+    "binary.obj": bytes(range(256)) * 4,
+    "no-vertex.obj": "f 1 2 3\n",
+    "nan.obj": "v nan 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n",
+    "kd.obj": ("mtllib kd.mtl\n" + TRIANGLE + "usemtl m\nf 1 2 3\n", "newmtl m\nKd 1.5 0.5 0.5\n"),
+    "ke.obj": (
+        "mtllib ke.mtl\n" + TRIANGLE + "usemtl m\nf 1 2 3\n",
+        "newmtl m\nKd 0.5 0.5 0.5\nKe -1 0 0\n",
+    ),
+    "two-coordinates.obj": "v 0 0\nv 1 0\nv 0 1\nf 1 2 3\n",
+}
+
+
+@pytest.mark.parametrize(
+    "name",
+    [name if name == "two-coordinates.obj" else name for name in BAD_INPUTS],
+)
+def test_bad_scene_is_one_line_and_writes_nothing(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], name: str
+) -> None:
+    content = BAD_INPUTS[name]
+    scene = tmp_path / name
+    if isinstance(content, tuple):  # OBJ + MTL
+        scene.write_text(content[0])
+        scene.with_suffix(".mtl").write_text(content[1])
+    elif isinstance(content, bytes):
+        scene.write_bytes(content)
+    elif content is not None:
+        scene.write_text(content)
+    out = tmp_path / "out"
+    status, stdout, err = run(["render", str(scene), "-o", str(out), "-q"], capsys)
+    assert status == 1
+    lines = err.strip().splitlines()
+    assert len(lines) == 1, err
+    assert lines[0].startswith("raytrad: error: ") and name in lines[0]
+    assert "Traceback" not in err and stdout == ""
+    assert not out.exists() or not any(out.iterdir())
+
+
+@pytest.mark.parametrize(
+    ("option", "value", "word"),
+    [
+        ("--tolerance", "0", "tolerance"),
+        ("--tolerance", "1.5", "tolerance"),
+        ("--samples", "0", "samples"),
+        ("--receivers", "0", "receivers"),
+        ("--scale", "-1", "scale"),
+        ("--scale", "nan", "scale"),
+        ("--omega", "2", "omega"),
+        ("--max-edge", "-0.1", "max edge"),
+        ("--method", "gauss-seidel", "method"),
+        ("--samples", "many", "samples"),
+    ],
+)
+def test_bad_option_values_are_refused(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], option: str, value: str, word: str
+) -> None:
+    out = tmp_path / "out"
+    status, _, err = run(["render", str(FURNACE_OBJ), "-o", str(out), option, value, "-q"], capsys)
+    assert status != 0
+    assert word in err.lower()
+    assert "Traceback" not in err
+    assert not out.exists()
+
+
+def test_render_help_lists_every_method(capsys: pytest.CaptureFixture[str]) -> None:
+    status, out, _ = run(["render", "--help"], capsys)
+    assert status == 0
+    for method in SHOOTING_METHODS:
+        assert method in out
+
+
+def test_scene_without_emitter_warns_and_writes_zeros(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], caplog: pytest.LogCaptureFixture
+) -> None:
+    scene = tmp_path / "dark.obj"
+    scene.write_text("mtllib dark.mtl\n" + TRIANGLE + "v 1 1 0\nusemtl m\nf 1 2 3\nf 2 4 3\n")
+    (tmp_path / "dark.mtl").write_text("newmtl m\nKd 0.5 0.5 0.5\nKe 0 0 0\n")
+    out = tmp_path / "out"
+    with caplog.at_level(logging.WARNING):
+        status, _, err = run(["render", str(scene), "-o", str(out), *SMALL], capsys)
+    assert status == 0, err
+    assert any(
+        "no emitter" in r.getMessage() for r in caplog.records if r.levelno >= logging.WARNING
+    )
+    _, _, radiosity = read_radiosity_ply(out / "dark.ply")
+    assert len(radiosity) > 100
+    np.testing.assert_array_equal(radiosity, 0.0)
+    report = json.loads((out / "report.json").read_text())
+    assert report["solve"]["stop_reason"] == "no-emission"
+
+
+def test_interrupted_render_resumes_to_the_same_answer(tmp_path: Path) -> None:
+    write_obj(cornell_box(), tmp_path / "cornell.obj")  # occluders: rays and sample points
+    scene = tmp_path / "cornell.obj"
+    settings = api.RenderSettings(
+        mesh=MeshSettings(receivers=800, patches=60), solve=SolveSettings(tolerance=1e-4)
+    )
+    straight = api.render(scene, tmp_path / "straight", settings)
+    assert straight.result.stop_reason == "converged"
+
+    out = tmp_path / "resumed"
+    polls = itertools.count()
+    first = api.render(scene, out, settings, stop=lambda: next(polls) >= 20)
+    checkpoint = out / "cornell.checkpoint.npz"
+    assert first.result.stop_reason == "interrupted"
+    assert first.result.state.shots == 20
+    assert checkpoint.is_file() and first.outputs["checkpoint"] == checkpoint
+    assert json.loads((out / "report.json").read_text())["solve"]["stop_reason"] == "interrupted"
+
+    second = api.render(scene, out, settings, resume=True)
+    assert second.result.stop_reason == "converged"
+    assert second.result.state.shots == straight.result.state.shots
+    np.testing.assert_allclose(second.result.radiosity, straight.result.radiosity, rtol=1e-9)
+    assert not checkpoint.exists()
+    _, _, written = read_radiosity_ply(out / "cornell.ply")
+    np.testing.assert_array_equal(written, straight.result.radiosity.astype(np.float32))
+
+
+def test_resume_refuses_a_checkpoint_of_other_settings(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    out = tmp_path / "out"
+    settings = api.RenderSettings(mesh=MeshSettings(receivers=800, patches=60))
+    polls = itertools.count()
+    api.render(FURNACE_OBJ, out, settings, stop=lambda: next(polls) >= 3)
+    assert (out / "furnace.checkpoint.npz").is_file()
+    # a different mesh is a different discrete system: the checkpoint must not be mixed in
+    status, _, err = run(
+        ["render", str(FURNACE_OBJ), "-o", str(out), "--receivers", "900", "--resume", "-q"],
+        capsys,
+    )
+    assert status == 1
+    assert "checkpoint" in err and len(err.strip().splitlines()) == 1
