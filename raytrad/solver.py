@@ -281,9 +281,9 @@ def check_solvable(mesh: RadiosityMesh) -> None:
     In a channel where every patch reflects everything (reflectance 1) and something
     emits, no energy is ever lost in a closed scene: the radiosity grows without bound.
     """
-    emits = (mesh.receiver_emitted_exitance > 0).any(axis=0).tolist()
-    lossless = (mesh.patch_reflectance >= 1.0).all(axis=0).tolist()
-    bad = [name for name, e, l in zip("RGB", emits, lossless, strict=True) if e and l]
+    emits = np.asarray(mesh.receiver_emitted_exitance > 0).any(axis=0)
+    lossless = np.asarray(mesh.patch_reflectance >= 1.0).all(axis=0)
+    bad = [name for c, name in enumerate("RGB") if emits[c] and lossless[c]]
     if bad:
         raise SolverError(
             f"every surface has reflectance 1 in channel {', '.join(bad)}: a closed scene "

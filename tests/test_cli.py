@@ -110,10 +110,7 @@ BAD_INPUTS = {
 }
 
 
-@pytest.mark.parametrize(
-    "name",
-    [name if name == "two-coordinates.obj" else name for name in BAD_INPUTS],
-)
+@pytest.mark.parametrize("name", list(BAD_INPUTS))
 def test_bad_scene_is_one_line_and_writes_nothing(
     tmp_path: Path, capsys: pytest.CaptureFixture[str], name: str
 ) -> None:
