@@ -281,8 +281,8 @@ def check_solvable(mesh: RadiosityMesh) -> None:
     In a channel where every patch reflects everything (reflectance 1) and something
     emits, no energy is ever lost in a closed scene: the radiosity grows without bound.
     """
-    emits = np.asarray(mesh.receiver_emitted_exitance > 0).any(axis=0)
-    lossless = np.asarray(mesh.patch_reflectance >= 1.0).all(axis=0)
+    emits: list[bool] = np.any(mesh.receiver_emitted_exitance > 0, axis=0).tolist()
+    lossless: list[bool] = np.all(mesh.patch_reflectance >= 1.0, axis=0).tolist()
     bad = [name for c, name in enumerate("RGB") if emits[c] and lossless[c]]
     if bad:
         raise SolverError(
