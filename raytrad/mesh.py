@@ -138,7 +138,10 @@ def _unique_edges(triangles: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def refine(
-    positions: np.ndarray, triangles: np.ndarray, max_edge: float, max_rounds: int = 40
+    positions: np.ndarray,
+    triangles: np.ndarray,
+    max_edge: float | np.ndarray,
+    max_rounds: int = 40,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Conforming refinement until no edge is longer than ``max_edge``.
 
@@ -151,7 +154,9 @@ def refine(
     ----------
     positions : (V, 3) float64 [m]
     triangles : (T, 3) int64
-    max_edge : float [m]
+    max_edge : float or (T,) float [m]
+        Longest edge allowed, overall or per input triangle (an edge shared by two
+        triangles takes the smaller limit, so the mesh stays conforming).
 
     Returns
     -------
@@ -162,10 +167,13 @@ def refine(
     positions = np.asarray(positions, dtype=np.float64)
     triangles = np.asarray(triangles, dtype=np.int64)
     parent = np.arange(triangles.shape[0])
+    limit = np.broadcast_to(np.asarray(max_edge, dtype=np.float64), parent.shape)
     for _ in range(max_rounds):
         edges, tri_edges = _unique_edges(triangles)
         length = np.linalg.norm(positions[edges[:, 1]] - positions[edges[:, 0]], axis=1)
-        marked = length > max_edge
+        edge_limit = np.full(len(edges), np.inf)
+        np.minimum.at(edge_limit, tri_edges.reshape(-1), np.repeat(limit[parent], 3))
+        marked = length > edge_limit
         if not marked.any():
             break
         longest = np.argmax(length[tri_edges], axis=1)
@@ -377,7 +385,7 @@ class MeshSettings:
     patch_size: float | None = None
     patches: int = 400
     samples: int = 16
-    emitter_samples: int = 64
+    emitter_samples: int = 256
     seed: int = 0
 
 
@@ -404,7 +412,10 @@ def build_mesh(
     total_area = float(base_area.sum())
     max_edge = settings.max_edge or max_edge_for_receivers(total_area, settings.receivers)
     surface = surface_labels(positions, triangles, material, CREASE_ANGLE)
-    positions, fine, parent = refine(positions, triangles, max_edge)
+    patch_size = settings.patch_size or math.sqrt(total_area / settings.patches)
+    emissive = (scene.material_emitted_exitance[material] > 0).any(axis=1)
+    limit = _edge_limits(base_area, surface, emissive, max_edge, patch_size, settings)
+    positions, fine, parent = refine(positions, triangles, limit)
     fine_surface = surface[parent]
     area, normal = triangle_areas_normals(positions[fine])
     keep = area > 0
@@ -428,7 +439,6 @@ def build_mesh(
     r_material[triangle_receivers.reshape(-1)] = np.repeat(tri_material, 3)
 
     centroids = positions[fine].mean(axis=1)
-    patch_size = settings.patch_size or math.sqrt(total_area / settings.patches)
     patch = bisect_clusters(
         centroids, fine_surface, lambda _l, extent: extent.max(axis=1) > patch_size
     )
@@ -455,6 +465,30 @@ def build_mesh(
         r_material,
         settings.seed,
     )
+
+
+def _edge_limits(
+    area: np.ndarray,
+    surface: np.ndarray,
+    emissive: np.ndarray,
+    max_edge: float,
+    patch_size: float,
+    settings: MeshSettings,
+) -> np.ndarray:
+    """(T,) longest refined edge per scene triangle [m].
+
+    Emitting surfaces are refined until each of their patches holds about
+    ``emitter_samples`` triangles, since a sub-area is a group of whole triangles: direct
+    shadows need more sample points than a small lamp would otherwise get.
+    """
+    limit = np.full(len(area), max_edge)
+    if emissive.any():
+        surface_area = np.bincount(surface, weights=area)[surface]
+        patch_area = np.minimum(surface_area, patch_size * patch_size)
+        # an equilateral triangle of edge h has area sqrt(3)/4 h^2; refinement halves edges
+        fine = np.sqrt(patch_area / (settings.emitter_samples * math.sqrt(3.0) / 4.0))
+        limit = np.where(emissive, np.minimum(limit, 1.5 * fine), limit)
+    return limit
 
 
 def _enclosed_triangles(
