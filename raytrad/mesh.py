@@ -486,8 +486,12 @@ def _edge_limits(
         surface_area = np.bincount(surface, weights=area)[surface]
         patch_area = np.minimum(surface_area, patch_size * patch_size)
         # an equilateral triangle of edge h has area sqrt(3)/4 h^2; refinement halves edges
-        fine = np.sqrt(patch_area / (settings.emitter_samples * math.sqrt(3.0) / 4.0))
-        limit = np.where(emissive, np.minimum(limit, 1.5 * fine), limit)
+        fine = 1.5 * np.sqrt(patch_area / (settings.emitter_samples * math.sqrt(3.0) / 4.0))
+        # ... but emitters never take more than a quarter of the receiver budget (a scene
+        # where everything glows, like a furnace, keeps the ordinary resolution)
+        receivers = area.sum() / (math.sqrt(3.0) / 2.0 * max_edge**2)
+        budget = max_edge_for_receivers(float(area[emissive].sum()), max(1, int(receivers / 4)))
+        limit = np.where(emissive, np.minimum(limit, np.maximum(fine, budget)), limit)
     return limit
 
 
