@@ -22,6 +22,7 @@ import numpy as np
 
 from raytrad import __version__
 from raytrad.checkpoint import fingerprint, load_checkpoint, save_checkpoint
+from raytrad.convergence import ConvergenceMonitor, ErrorLog, Reference
 from raytrad.display import display_colors
 from raytrad.errors import RaytradError, SettingsError
 from raytrad.formfactor import FormFactorEngine
@@ -29,6 +30,13 @@ from raytrad.io.atomic import atomic_write
 from raytrad.io.loaders import load_scene
 from raytrad.io.ply import write_radiosity_ply
 from raytrad.mesh import MeshSettings, RadiosityMesh, build_mesh
+from raytrad.plot import plot_convergence
+from raytrad.reference import (
+    DENSE_PATCH_LIMIT,
+    analytic_furnace,
+    dense_solve,
+    reference_from_ply,
+)
 from raytrad.scene import Scene, has_emission, triangle_areas_normals
 from raytrad.solver import SolveResult, SolverState, SolveSettings, solve
 from raytrad.visibility import Occluder, nothing_can_occlude
@@ -105,6 +113,46 @@ class RenderOutcome:
     prepared: Prepared
     outputs: dict[str, Path]
     report: dict[str, Any]
+    error_log: ErrorLog
+
+
+def make_reference(spec: str, prepared: Prepared) -> Reference:
+    """A reference solution for the true-error log.
+
+    Parameters
+    ----------
+    spec : str
+        ``dense`` (direct solve of the same discrete system), ``analytic`` (B = E/(1-rho),
+        closed scenes of uniform materials) or the path of a previous result PLY.
+
+    Raises
+    ------
+    RaytradError
+        When the reference does not apply to this scene.
+    """
+    mesh = prepared.mesh
+    if spec == "dense":
+        if mesh.patch_count > DENSE_PATCH_LIMIT:
+            raise SettingsError(
+                f"{mesh.patch_count} patches is too many for a dense reference "
+                f"(limit {DENSE_PATCH_LIMIT}); use --patches or a previous result"
+            )
+        return Reference(
+            dense_solve(mesh, prepared.engine),
+            "dense",
+            "direct solve of the same discrete system",
+        )
+    if spec == "analytic":
+        if prepared.occluder is not None:
+            raise SettingsError(
+                "the analytic reference B = E/(1-rho) needs a closed convex enclosure"
+            )
+        try:
+            radiosity = analytic_furnace(mesh)
+        except ValueError as exc:
+            raise SettingsError(str(exc)) from exc
+        return Reference(radiosity, "analytic", "closed enclosure: B = E / (1 - rho)")
+    return Reference(reference_from_ply(spec, mesh), "file", f"previous result {spec}")
 
 
 @contextmanager
@@ -148,8 +196,10 @@ def render(
     output_dir: str | Path,
     settings: RenderSettings | None = None,
     resume: bool = False,
-    progress: Callable[[SolverState, float], None] | None = None,
+    progress: Callable[[SolverState, float, float], None] | None = None,
     stop: Callable[[], bool] | None = None,
+    reference: str | None = None,
+    plot: bool = False,
 ) -> RenderOutcome:
     """Load, mesh, solve and write ``<output_dir>/<stem>.ply`` and ``report.json``.
 
@@ -163,10 +213,14 @@ def render(
     resume : bool
         Continue from ``<output_dir>/<stem>.checkpoint.npz`` if it exists.
     progress : callable or None
-        ``progress(state, residual)`` after each shot.
+        ``progress(state, residual, error_estimate)`` after each shot.
     stop : callable or None
         Polled before each shot; True stops the solve, writes the outputs so far and a
         checkpoint to resume from.
+    reference : str or None
+        Measure the true error against this reference (see :func:`make_reference`).
+    plot : bool
+        Also write ``convergence.png`` (error against time).
 
     Raises
     ------
@@ -183,6 +237,15 @@ def render(
         log.warning("%s: the scene has no emitter; every radiosity is zero", scene_path)
     prepared = prepare(scene, settings)
     timings.update(prepared.timings)
+    try:
+        ref = None
+        if reference is not None:
+            with _timed(timings, "reference"):
+                ref = make_reference(reference, prepared)
+    except BaseException:
+        prepared.close()
+        raise
+    monitor = ConvergenceMonitor(prepared.mesh, prepared.engine, ref)
     stem = scene_path.stem
     checkpoint = output_dir / f"{stem}.checkpoint.npz"
     key = fingerprint(scene_path.read_bytes(), settings.system_settings())
@@ -194,8 +257,9 @@ def render(
     last_save = [time.perf_counter()]
 
     def on_shot(s: SolverState, residual: float) -> None:
+        monitor(s, residual)
         if progress is not None:
-            progress(s, residual)
+            progress(s, residual, monitor.latest_estimate)
         if time.perf_counter() - last_save[0] >= settings.checkpoint_seconds:
             output_dir.mkdir(parents=True, exist_ok=True)
             save_checkpoint(checkpoint, s, key)
@@ -204,21 +268,33 @@ def render(
     try:
         with _timed(timings, "solve"):
             result = solve(prepared.mesh, prepared.engine, settings.solve, state, on_shot, stop)
+        error_log = monitor.finish(result.state)
         with _timed(timings, "write"):
             outputs = _write_outputs(prepared, result, output_dir, stem, settings)
+            if plot:
+                outputs["plot"] = output_dir / "convergence.png"
+                plot_convergence(outputs["plot"], {result.method: error_log}, str(scene_path))
         if result.stop_reason in ("interrupted", "time-limit", "max-shots"):
             save_checkpoint(checkpoint, result.state, key)  # --resume continues from here
             outputs["checkpoint"] = checkpoint
         elif checkpoint.exists():
             checkpoint.unlink()
         report = build_report(scene_path, prepared, result, settings, timings, outputs)
+        report["reference"] = (
+            None if ref is None else {"kind": ref.kind, "description": ref.description}
+        )
+        report["convergence"] = error_log.as_dict()
+        report["error"] = {
+            name: (getattr(error_log, name)[-1] if getattr(error_log, name) else None)
+            for name in ("estimate", "bound_rms", "bound_max", "true_rms", "true_max")
+        }
         report_path = output_dir / "report.json"
         with atomic_write(report_path, "w") as handle:
             json.dump(report, handle, indent=2)
         outputs["report"] = report_path
     finally:
         prepared.close()
-    return RenderOutcome(result, prepared, outputs, report)
+    return RenderOutcome(result, prepared, outputs, report, error_log)
 
 
 def _write_outputs(

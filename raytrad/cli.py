@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import logging
+import math
 import signal
 import sys
 import time
@@ -13,6 +14,7 @@ from types import FrameType
 from typing import Any
 
 from raytrad import __version__
+from raytrad.convergence import eta_seconds
 from raytrad.errors import RaytradError
 from raytrad.mesh import MeshSettings
 from raytrad.solver import SHOOTING_METHODS, SolverState, SolveSettings
@@ -157,9 +159,21 @@ def build_parser() -> argparse.ArgumentParser:
         help="memory for reusing form factors between shots of a patch (default: %(default)s)",
     )
     render.add_argument(
+        "--reference",
+        default=None,
+        metavar="REF",
+        help="log the true error against REF: 'dense' (direct solve of the same system, "
+        "small scenes), 'analytic' (closed uniform enclosure, B = E/(1-rho)) or a previous "
+        "result .ply",
+    )
+    render.add_argument(
+        "--plot", action="store_true", help="also write DIR/convergence.png: error against time"
+    )
+    render.add_argument(
         "--resume",
         action="store_true",
-        help="continue an interrupted run from its checkpoint in DIR",
+        help="continue a stopped run (Ctrl-C, --time-limit, --max-shots) from its checkpoint "
+        "in DIR; the limits count the whole solve",
     )
     render.add_argument(
         "-q", "--quiet", action="store_true", help="no progress bar, only warnings and errors"
@@ -169,24 +183,37 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 class _Progress:
-    """A tqdm progress bar on a terminal; nothing when output is redirected (CI logs)."""
+    """A tqdm progress bar on a terminal; nothing when output is redirected (CI logs).
 
-    def __init__(self, enabled: bool) -> None:
+    Shows shots, the residual (unshot power / emitted power), the error estimate, rays/s
+    and the time to the target tolerance extrapolated from the recent decay.
+    """
+
+    def __init__(self, enabled: bool, tolerance: float) -> None:
         self._bar: Any = None
         if enabled and sys.stderr.isatty():
             from tqdm import tqdm
 
             self._bar = tqdm(unit="shot", dynamic_ncols=True, file=sys.stderr, mininterval=0.25)
+        self._tolerance = tolerance
+        self._seconds: list[float] = []
+        self._residuals: list[float] = []
         self._last = 0.0
 
-    def __call__(self, state: SolverState, residual: float) -> None:
+    def __call__(self, state: SolverState, residual: float, estimate: float = math.nan) -> None:
         if self._bar is None:
             return
         self._bar.update(state.shots - self._bar.n)
         now = time.perf_counter()
         if now - self._last > 0.25:
+            self._seconds.append(state.seconds)
+            self._residuals.append(residual)
             rate = state.rays / state.seconds if state.seconds > 0 else 0.0
-            self._bar.set_postfix_str(f"residual {residual:.2e}  rays/s {rate:.3g}")
+            eta = eta_seconds(self._seconds, self._residuals, self._tolerance)
+            eta_text = f"{eta:.0f}s" if math.isfinite(eta) else "?"
+            self._bar.set_postfix_str(
+                f"residual {residual:.2e}  error~{estimate:.1e}  rays/s {rate:.3g}  ETA {eta_text}"
+            )
             self._last = now
 
     def close(self) -> None:
@@ -234,11 +261,20 @@ def _render(args: argparse.Namespace) -> int:
         exposure=args.exposure,
         cache_mb=args.cache_mb,
     )
-    progress = _Progress(enabled=not args.quiet)
+    progress = _Progress(enabled=not args.quiet, tolerance=args.tolerance)
     stop = _StopFlag()
     previous = signal.signal(signal.SIGINT, stop.handler)
     try:
-        outcome = api.render(args.scene, args.output, settings, args.resume, progress, stop)
+        outcome = api.render(
+            args.scene,
+            args.output,
+            settings,
+            args.resume,
+            progress,
+            stop,
+            reference=args.reference,
+            plot=args.plot,
+        )
     finally:
         signal.signal(signal.SIGINT, previous)
         progress.close()
@@ -260,8 +296,25 @@ def _print_summary(report: dict[str, Any]) -> None:
         + ")",
         "time       " + ", ".join(f"{k} {v:.2f}s" for k, v in t.items()) + f"; total {total:.2f}s",
     ]
+    error = report.get("error") or {}
+    if error.get("estimate") is not None:
+        text = (
+            f"error      estimate {max(error['estimate']):.2e}, "
+            f"bound {_fmt(max(_finite(error['bound_rms'])))}"
+        )
+        if error.get("true_rms") is not None:
+            text += f", true {max(error['true_rms']):.2e} ({report['reference']['kind']})"
+        lines.append(text + " (relative RMS, worst channel)")
     lines += [f"wrote      {path}" for path in report["outputs"].values()]
     print("\n".join(lines))
+
+
+def _finite(values: list[float | None]) -> list[float]:
+    return [math.inf if v is None else v for v in values]
+
+
+def _fmt(value: float) -> str:
+    return f"{value:.2e}" if math.isfinite(value) else "none yet"
 
 
 def main(argv: Sequence[str] | None = None) -> int:

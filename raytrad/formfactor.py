@@ -241,6 +241,10 @@ class FormFactorEngine:
         self._pool: ThreadPoolExecutor | None = None
         self.rays_cast = 0
         self.columns_computed = 0
+        # Row sums sum_p F_jp over the columns computed so far (for the error bound).
+        self._row_sum = np.zeros(mesh.receiver_count)
+        self._summed: set[int] = set()
+        self.max_row_sum = 0.0
         diag = float(np.linalg.norm(np.ptp(mesh.positions, axis=0)))
         self.diagonal = diag
         self._points, self._origins = _receiver_points(mesh, RAY_OFFSET * diag)
@@ -271,6 +275,11 @@ class FormFactorEngine:
         col = self._compute(patch)
         self.columns_computed += 1
         self.rays_cast += col.rays
+        if patch not in self._summed:
+            self._summed.add(patch)
+            self._row_sum[col.receivers] += col.factors
+            if len(col.receivers):
+                self.max_row_sum = max(self.max_row_sum, float(self._row_sum[col.receivers].max()))
         size = col.receivers.nbytes + col.factors.nbytes + 64
         if self._cached_bytes + size <= self.cache_bytes:
             self._cache[patch] = col

@@ -2,10 +2,12 @@
 
 from __future__ import annotations
 
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from raytrad.errors import SceneError
 from raytrad.formfactor import FormFactorEngine
 from raytrad.mesh import RadiosityMesh
 from raytrad.scene import Scene, triangle_areas_normals
@@ -192,3 +194,68 @@ def _cosine_directions(normal: np.ndarray, rng: np.random.Generator) -> np.ndarr
     tangent /= np.linalg.norm(tangent, axis=1)[:, None]
     bitangent = np.cross(normal, tangent)
     return local[:, :1] * tangent + local[:, 1:2] * bitangent + local[:, 2:] * normal
+
+
+def analytic_furnace(mesh: RadiosityMesh) -> np.ndarray:
+    """B = E / (1 - rho) at every receiver, for a closed scene of uniform rho and E.
+
+    Raises
+    ------
+    ValueError
+        When reflectance or emission is not uniform (the closed form does not apply).
+    """
+    rho, emission = mesh.receiver_reflectance, mesh.receiver_emitted_exitance
+    if np.ptp(rho, axis=0).max() > 0 or np.ptp(emission, axis=0).max() > 0:
+        raise ValueError(
+            "the analytic reference needs uniform reflectance and emission on every surface"
+        )
+    return emission / (1.0 - rho)
+
+
+def reference_from_ply(path: str | Path, mesh: RadiosityMesh) -> np.ndarray:
+    """Radiosity of a previous result (a raytrad PLY) at this mesh's receivers.
+
+    The same mesh settings give the same receivers in the same order, which are used as
+    they are. Otherwise each receiver takes the value of the nearest reference vertex whose
+    surface faces the same way (a finer converged run is a good reference).
+
+    Raises
+    ------
+    SceneError
+        The file is not a raytrad result, or has no vertex facing like some receiver.
+    """
+    from raytrad.io.ply import read_radiosity_ply
+
+    path = Path(path)
+    positions, triangles, radiosity = read_radiosity_ply(path)
+    diagonal = float(np.linalg.norm(np.ptp(mesh.receiver_position, axis=0)))
+    if positions.shape == mesh.receiver_position.shape and np.allclose(
+        positions, mesh.receiver_position, rtol=0.0, atol=1e-6 * diagonal
+    ):
+        return radiosity
+    return _nearest_facing(path, positions, triangles, radiosity, mesh)
+
+
+def _nearest_facing(
+    path: Path,
+    positions: np.ndarray,
+    triangles: np.ndarray,
+    radiosity: np.ndarray,
+    mesh: RadiosityMesh,
+) -> np.ndarray:
+    from scipy.spatial import cKDTree
+
+    _, face_normal = triangle_areas_normals(positions[triangles])
+    normal = np.zeros_like(positions)
+    for k in range(3):
+        np.add.at(normal, triangles[:, k], face_normal)
+    normal /= np.maximum(np.linalg.norm(normal, axis=1), 1e-300)[:, None]
+    tree = cKDTree(positions)
+    count = min(16, len(positions))
+    _, candidates = tree.query(mesh.receiver_position, k=count)
+    candidates = candidates.reshape(len(mesh.receiver_position), count)
+    facing = np.einsum("rkj,rj->rk", normal[candidates], mesh.receiver_normal) > 0.5
+    if not facing.any(axis=1).all():
+        raise SceneError(path, "reference has no vertex facing like some receivers")
+    best = candidates[np.arange(len(candidates)), np.argmax(facing, axis=1)]
+    return radiosity[best]
