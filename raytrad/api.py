@@ -31,12 +31,7 @@ from raytrad.io.loaders import load_scene
 from raytrad.io.ply import write_radiosity_ply
 from raytrad.mesh import MeshSettings, RadiosityMesh, build_mesh
 from raytrad.plot import plot_convergence
-from raytrad.reference import (
-    DENSE_PATCH_LIMIT,
-    analytic_furnace,
-    dense_solve,
-    reference_from_ply,
-)
+from raytrad.reference import analytic_furnace, dense_solve, reference_from_ply
 from raytrad.scene import Scene, has_emission, triangle_areas_normals
 from raytrad.solver import SolveResult, SolverState, SolveSettings, solve
 from raytrad.visibility import Occluder, nothing_can_occlude
@@ -132,16 +127,11 @@ def make_reference(spec: str, prepared: Prepared) -> Reference:
     """
     mesh = prepared.mesh
     if spec == "dense":
-        if mesh.patch_count > DENSE_PATCH_LIMIT:
-            raise SettingsError(
-                f"{mesh.patch_count} patches is too many for a dense reference "
-                f"(limit {DENSE_PATCH_LIMIT}); use --patches or a previous result"
-            )
-        return Reference(
-            dense_solve(mesh, prepared.engine),
-            "dense",
-            "direct solve of the same discrete system",
-        )
+        try:
+            radiosity = dense_solve(mesh, prepared.engine)
+        except ValueError as exc:
+            raise SettingsError(f"{exc}; use fewer patches or a previous result") from exc
+        return Reference(radiosity, "dense", "direct solve of the same discrete system")
     if spec == "analytic":
         if prepared.occluder is not None:
             raise SettingsError(

@@ -39,124 +39,25 @@ def build_parser() -> argparse.ArgumentParser:
     render = sub.add_parser(
         "render",
         help="solve a scene and write per-vertex radiosity (PLY) and report.json",
-        description="Solve SCENE and write OUT/<name>.ply (float radiosity_r/g/b [W m-2] "
-        "and 8-bit display colours per vertex) and OUT/report.json.",
-        epilog="Units: scene coordinates in metres (see --scale); OBJ Kd = reflectance, "
-        "Ke = emitted exitance [W m-2]; glTF emissive = radiance [W sr-1 m-2].",
+        description="Solve SCENE and write DIR/<name>.ply (float radiosity_r/g/b [W m-2] "
+        "and 8-bit display colours per vertex) and DIR/report.json (settings, timings, "
+        "energy ledger, error log).",
+        epilog=_UNITS,
     )
-    render.add_argument(
-        "scene", type=Path, metavar="SCENE", help="scene file: .obj (+.mtl), .gltf, .glb or .ply"
-    )
-    render.add_argument(
-        "-o",
-        "--output",
-        type=Path,
-        default=Path("raytrad-out"),
-        metavar="DIR",
-        help="output directory (default: %(default)s)",
-    )
-    methods = ", ".join(f"{k}: {_METHOD_HELP.get(k, k)}" for k in SHOOTING_METHODS)
+    _add_common(render, default_tolerance=1e-3)
     render.add_argument(
         "--method",
         choices=list(SHOOTING_METHODS),
         default="ambient",
-        help=f"solver ({methods}); default: %(default)s",
-    )
-    render.add_argument(
-        "--tolerance",
-        type=float,
-        default=1e-3,
-        help="stop when the unshot power falls below this fraction of the "
-        "emitted power (default: %(default)g)",
-    )
-    render.add_argument(
-        "--time-limit",
-        type=float,
-        default=None,
-        metavar="SECONDS",
-        help="stop solving after this many seconds",
-    )
-    render.add_argument(
-        "--max-shots", type=int, default=None, metavar="N", help="stop after N shots"
-    )
-    render.add_argument(
-        "--omega",
-        type=float,
-        default=1.3,
-        help="overrelaxation factor for --method overrelaxation (default: %(default)s)",
-    )
-    defaults = MeshSettings()
-    render.add_argument(
-        "--receivers",
-        type=int,
-        default=defaults.receivers,
-        metavar="N",
-        help="target receiver (vertex) count; the mesh is refined to reach "
-        "it (default: %(default)s)",
-    )
-    render.add_argument(
-        "--max-edge",
-        type=float,
-        default=None,
-        metavar="METRES",
-        help="refine until no edge is longer than this [m] (overrides --receivers)",
-    )
-    render.add_argument(
-        "--patches",
-        type=int,
-        default=defaults.patches,
-        metavar="N",
-        help="target shooting-patch count (default: %(default)s)",
-    )
-    render.add_argument(
-        "--patch-size",
-        type=float,
-        default=None,
-        metavar="METRES",
-        help="largest patch extent [m] (overrides --patches)",
-    )
-    render.add_argument(
-        "--samples",
-        type=int,
-        default=defaults.samples,
-        metavar="N",
-        help="visibility sample points per patch (default: %(default)s)",
-    )
-    render.add_argument(
-        "--emitter-samples",
-        type=int,
-        default=defaults.emitter_samples,
-        metavar="N",
-        help="sample points per emitting patch; more give "
-        "smoother direct shadows (default: %(default)s)",
-    )
-    render.add_argument(
-        "--seed",
-        type=int,
-        default=0,
-        help="seed of the sample points; same seed, same result (default: %(default)s)",
-    )
-    render.add_argument(
-        "--scale",
-        type=float,
-        default=1.0,
-        help="multiply coordinates by this to get metres, e.g. 0.001 for "
-        "millimetres (default: %(default)s)",
+        help=f"solver ({_methods_text()}); default: %(default)s",
     )
     render.add_argument(
         "--exposure",
         type=float,
         default=0.0,
         metavar="EV",
-        help="brighten the PLY display colours by EV stops on top of the "
-        "automatic exposure (default: %(default)s)",
-    )
-    render.add_argument(
-        "--cache-mb",
-        type=float,
-        default=1024.0,
-        metavar="MIB",
-        help="memory for reusing form factors between shots of a patch (default: %(default)s)",
+        help="brighten the PLY display colours by EV stops on top of the automatic exposure "
+        "(default: %(default)s)",
     )
     render.add_argument(
         "--reference",
@@ -175,11 +76,141 @@ def build_parser() -> argparse.ArgumentParser:
         help="continue a stopped run (Ctrl-C, --time-limit, --max-shots) from its checkpoint "
         "in DIR; the limits count the whole solve",
     )
-    render.add_argument(
-        "-q", "--quiet", action="store_true", help="no progress bar, only warnings and errors"
+    compare = sub.add_parser(
+        "compare",
+        help="run several solver methods on one scene and compare error against time",
+        description="Run each method on the same receivers and form-factor settings and "
+        "write DIR/compare.png (true error against time), DIR/compare.md and "
+        "DIR/compare.json (seconds and shots to 1e-2 and 1e-3 true error, final error, "
+        "rays).",
+        epilog=_UNITS,
     )
-    render.add_argument("-v", "--verbose", action="store_true", help="log details")
+    _add_common(compare, default_tolerance=1e-4)
+    compare.add_argument(
+        "--methods",
+        default=",".join(SHOOTING_METHODS),
+        help="comma-separated methods (default: %(default)s)",
+    )
+    compare.add_argument(
+        "--reference",
+        default=None,
+        metavar="REF",
+        help="'dense', 'analytic' or a previous result .ply; default: a dense solve when it "
+        "fits in memory, else a long converged run (the output says which)",
+    )
     return parser
+
+
+_UNITS = (
+    "Units: scene coordinates in metres (see --scale); OBJ Kd = reflectance, Ke = emitted "
+    "exitance [W m-2]; glTF emissive = radiance [W sr-1 m-2]."
+)
+
+
+def _methods_text() -> str:
+    return ", ".join(f"{k}: {_METHOD_HELP.get(k, k)}" for k in SHOOTING_METHODS)
+
+
+def _add_common(parser: argparse.ArgumentParser, default_tolerance: float) -> None:
+    """Options shared by ``render`` and ``compare``: scene, output, mesh, stopping rules."""
+    defaults = MeshSettings()
+    add = parser.add_argument
+    add("scene", type=Path, metavar="SCENE", help="scene file: .obj (+.mtl), .gltf, .glb or .ply")
+    add(
+        "-o",
+        "--output",
+        type=Path,
+        default=Path("raytrad-out"),
+        metavar="DIR",
+        help="output directory (default: %(default)s)",
+    )
+    add(
+        "--tolerance",
+        type=float,
+        default=default_tolerance,
+        help="stop when the unshot power falls below this fraction of the emitted power "
+        "(default: %(default)g)",
+    )
+    add(
+        "--time-limit",
+        type=float,
+        default=None,
+        metavar="SECONDS",
+        help="stop solving after this many seconds",
+    )
+    add("--max-shots", type=int, default=None, metavar="N", help="stop after N shots")
+    add(
+        "--omega",
+        type=float,
+        default=1.3,
+        help="overrelaxation factor for the overrelaxation method (default: %(default)s)",
+    )
+    add(
+        "--receivers",
+        type=int,
+        default=defaults.receivers,
+        metavar="N",
+        help="target receiver (vertex) count; the mesh is refined to reach it "
+        "(default: %(default)s)",
+    )
+    add(
+        "--max-edge",
+        type=float,
+        default=None,
+        metavar="METRES",
+        help="refine until no edge is longer than this [m] (overrides --receivers)",
+    )
+    add(
+        "--patches",
+        type=int,
+        default=defaults.patches,
+        metavar="N",
+        help="target shooting-patch count (default: %(default)s)",
+    )
+    add(
+        "--patch-size",
+        type=float,
+        default=None,
+        metavar="METRES",
+        help="largest patch extent [m] (overrides --patches)",
+    )
+    add(
+        "--samples",
+        type=int,
+        default=defaults.samples,
+        metavar="N",
+        help="visibility sample points per patch (default: %(default)s)",
+    )
+    add(
+        "--emitter-samples",
+        type=int,
+        default=defaults.emitter_samples,
+        metavar="N",
+        help="sample points per emitting patch; more give smoother direct shadows "
+        "(default: %(default)s)",
+    )
+    add(
+        "--seed",
+        type=int,
+        default=defaults.seed,
+        help="seed of the sample points; same seed, same result (default: %(default)s)",
+    )
+    add(
+        "--scale",
+        type=float,
+        default=1.0,
+        help="multiply coordinates by this to get metres, e.g. 0.001 for millimetres "
+        "(default: %(default)s)",
+    )
+    add(
+        "--cache-mb",
+        type=float,
+        default=1024.0,
+        metavar="MIB",
+        help="memory for reusing form factors between shots of a patch (default: %(default)s)",
+    )
+    add("-q", "--quiet", action="store_true", help="no progress bar, only warnings and errors")
+    add("-v", "--verbose", action="store_true", help="log details")
 
 
 class _Progress:
@@ -237,10 +268,10 @@ class _StopFlag:
         print("\nraytrad: stopping after this shot (Ctrl-C again to abort)", file=sys.stderr)
 
 
-def _render(args: argparse.Namespace) -> int:
+def _settings(args: argparse.Namespace, method: str) -> Any:
     from raytrad import api
 
-    settings = api.RenderSettings(
+    return api.RenderSettings(
         mesh=MeshSettings(
             max_edge=args.max_edge,
             receivers=args.receivers,
@@ -251,16 +282,35 @@ def _render(args: argparse.Namespace) -> int:
             seed=args.seed,
         ),
         solve=SolveSettings(
-            method=args.method,
+            method=method,
             tolerance=args.tolerance,
             time_limit=args.time_limit,
             max_shots=args.max_shots,
             omega=args.omega,
         ),
         scale=args.scale,
-        exposure=args.exposure,
+        exposure=getattr(args, "exposure", 0.0),
         cache_mb=args.cache_mb,
     )
+
+
+def _compare(args: argparse.Namespace) -> int:
+    from raytrad.compare import compare, markdown_table
+
+    methods = [m.strip() for m in args.methods.split(",") if m.strip()]
+    summary = compare(args.scene, args.output, methods, _settings(args, "ambient"), args.reference)
+    if not args.quiet:
+        ref = summary["reference"]
+        print(f"reference: {ref['kind']} ({ref['description']})")
+        print(markdown_table(summary["table"]), end="")
+        print(f"wrote      {args.output / 'compare.md'}, compare.json, compare.png")
+    return 0
+
+
+def _render(args: argparse.Namespace) -> int:
+    from raytrad import api
+
+    settings = _settings(args, args.method)
     progress = _Progress(enabled=not args.quiet, tolerance=args.tolerance)
     stop = _StopFlag()
     previous = signal.signal(signal.SIGINT, stop.handler)
@@ -327,6 +377,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         if args.command == "render":
             return _render(args)
+        if args.command == "compare":
+            return _compare(args)
     except RaytradError as exc:
         print(f"raytrad: error: {exc}", file=sys.stderr)
         return 1

@@ -15,6 +15,8 @@ from raytrad.solver import patch_average_matrix
 
 #: Largest patch count for which the dense matrices are built.
 DENSE_PATCH_LIMIT = 4000
+#: Largest receivers x patches (dense form-factor matrix entries, 8 bytes each).
+DENSE_SIZE_LIMIT = 60_000_000
 
 
 def form_factor_matrix(engine: FormFactorEngine) -> np.ndarray:
@@ -42,8 +44,14 @@ def dense_solve(mesh: RadiosityMesh, engine: FormFactorEngine) -> np.ndarray:
     ValueError
         More than :data:`DENSE_PATCH_LIMIT` patches.
     """
-    if mesh.patch_count > DENSE_PATCH_LIMIT:
-        raise ValueError(f"{mesh.patch_count} patches is too many for a dense solve")
+    if (
+        mesh.patch_count > DENSE_PATCH_LIMIT
+        or mesh.patch_count * mesh.receiver_count > DENSE_SIZE_LIMIT
+    ):
+        raise ValueError(
+            f"{mesh.receiver_count} receivers x {mesh.patch_count} patches is too large "
+            "for a dense solve"
+        )
     factors = form_factor_matrix(engine)
     average = patch_average_matrix(mesh)  # (P, R)
     emission = mesh.receiver_emitted_exitance
