@@ -93,11 +93,19 @@ class Prepared:
     engine: FormFactorEngine
     occluder: Occluder | None
     timings: dict[str, float]
+    closed_receivers: np.ndarray | None = None
 
     def close(self) -> None:
         self.engine.close()
         if self.occluder is not None:
             self.occluder.close()
+
+    def new_engine(self) -> FormFactorEngine:
+        """A fresh engine on the same mesh (no cached columns), closed rows normalised."""
+        engine = FormFactorEngine(self.mesh, self.occluder, cache_bytes=self.engine.cache_bytes)
+        if self.closed_receivers is not None:
+            engine.normalize_closed_rows(self.closed_receivers)
+        return engine
 
 
 @dataclass
@@ -178,7 +186,19 @@ def prepare(scene: Scene, settings: RenderSettings | None = None) -> Prepared:
 
         mesh = build_mesh(scene, settings.mesh, enclosed)
     engine = FormFactorEngine(mesh, occluder, cache_bytes=int(settings.cache_mb * (1 << 20)))
-    return Prepared(scene, mesh, engine, occluder, timings)
+    closed = None
+    if occluder is not None:
+        with _timed(timings, "form_factors"):
+            _, normals = triangle_areas_normals(scene.triangle_vertices())
+            closed = occluder.sees_only_front_faces(
+                engine.evaluation_points, mesh.receiver_normal, normals, scene.double_sided
+            )
+            if closed.any():
+                rows = engine.normalize_closed_rows(closed)
+                log.info("form factors of %d receivers that see no opening sum to 1", rows)
+            else:
+                closed = None
+    return Prepared(scene, mesh, engine, occluder, timings, closed)
 
 
 def render(
@@ -310,7 +330,9 @@ def build_report(
 ) -> dict[str, Any]:
     """The JSON-ready summary of a render: settings, statistics, timings, energy ledger."""
     mesh, state = prepared.mesh, result.state
-    rays_per_second = state.rays / state.seconds if state.seconds > 0 else 0.0
+    rays = prepared.engine.rays_cast  # this run's rays, the form-factor pre-pass included
+    tracing = state.seconds + timings.get("form_factors", 0.0)
+    rays_per_second = rays / tracing if tracing > 0 else 0.0
     return {
         "raytrad_version": __version__,
         "scene": str(scene_path),
@@ -334,7 +356,7 @@ def build_report(
             "method": result.method,
             "stop_reason": result.stop_reason,
             "shots": state.shots,
-            "rays": state.rays,
+            "rays": rays,
             "rays_per_second": rays_per_second,
             "form_factor_columns": prepared.engine.columns_computed,
             "residual": result.residual,

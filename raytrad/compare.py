@@ -9,6 +9,7 @@ from __future__ import annotations
 import json
 import logging
 import math
+import time
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
@@ -16,7 +17,6 @@ from typing import Any
 from raytrad.api import Prepared, RenderSettings, make_reference, prepare
 from raytrad.convergence import ConvergenceMonitor, ErrorLog, Reference
 from raytrad.errors import SettingsError
-from raytrad.formfactor import FormFactorEngine
 from raytrad.io.atomic import atomic_write
 from raytrad.io.loaders import load_scene
 from raytrad.reference import DENSE_PATCH_LIMIT, DENSE_SIZE_LIMIT
@@ -38,19 +38,26 @@ class MethodRun:
     shots: int
     rays: int
     seconds: float
+    setup_seconds: float = 0.0
 
     def row(self) -> dict[str, Any]:
-        """Table row: time and shots to each level of true error, final error, rays."""
+        """Table row: time and shots to each level of true error, final error, rays.
+
+        Times include the method's own form-factor set-up (``setup_seconds``).
+        """
         out: dict[str, Any] = {"method": self.method, "stop_reason": self.stop_reason}
         for level in LEVELS:
             reached = self.log.first_below(level)
-            out[f"seconds_to_{level:g}"] = None if reached is None else reached[0]
+            out[f"seconds_to_{level:g}"] = (
+                None if reached is None else reached[0] + self.setup_seconds
+            )
             out[f"shots_to_{level:g}"] = None if reached is None else reached[1]
         final = self.log.true_rms[-1] if self.log.true_rms else None
         out["final_true_rms"] = None if final is None else max(final)
         out["shots"] = self.shots
         out["rays"] = self.rays
-        out["seconds"] = self.seconds
+        out["seconds"] = self.seconds + self.setup_seconds
+        out["setup_seconds"] = self.setup_seconds
         return out
 
 
@@ -128,7 +135,9 @@ def compare(
 
 def _run(prepared: Prepared, settings: RenderSettings, method: str, ref: Reference) -> MethodRun:
     mesh = prepared.mesh
-    engine = FormFactorEngine(mesh, prepared.occluder, cache_bytes=prepared.engine.cache_bytes)
+    start = time.perf_counter()
+    engine = prepared.new_engine()
+    setup = time.perf_counter() - start
     monitor = ConvergenceMonitor(mesh, engine, ref)
     try:
         result = solve(mesh, engine, replace(settings.solve, method=method), progress=monitor)
@@ -137,7 +146,13 @@ def _run(prepared: Prepared, settings: RenderSettings, method: str, ref: Referen
     state = result.state
     log.info("%s: %s after %d shots", method, result.stop_reason, state.shots)
     return MethodRun(
-        method, monitor.finish(state), result.stop_reason, state.shots, state.rays, state.seconds
+        method,
+        monitor.finish(state),
+        result.stop_reason,
+        state.shots,
+        engine.rays_cast,
+        state.seconds,
+        setup,
     )
 
 

@@ -102,9 +102,7 @@ def error_bound(
     q_max = max_reflectance * max_row_sum
     q_sum = max_reflectance * max_capture
     with np.errstate(divide="ignore", invalid="ignore"):
-        e_max = np.where(
-            q_max < 1.0, q_max * np.abs(unshot).max(axis=0) / (1.0 - q_max), np.inf
-        )
+        e_max = np.where(q_max < 1.0, q_max * np.abs(unshot).max(axis=0) / (1.0 - q_max), np.inf)
         e_mean = np.where(
             q_sum < 1.0,
             q_sum * (patch_area @ np.abs(unshot)) / (1.0 - q_sum) / total_area,
@@ -227,9 +225,7 @@ class ConvergenceMonitor:
     def __call__(self, state: SolverState, residual: float = math.nan) -> None:
         if state.shots >= self._next:
             self.record(state)
-            self._next = (
-                state.shots + 1 if state.shots < 20 else int(state.shots * LOG_SPACING) + 1
-            )
+            self._next = state.shots + 1 if state.shots < 20 else int(state.shots * LOG_SPACING) + 1
 
     def record(self, state: SolverState) -> None:
         """Add one row for the current state."""
@@ -240,12 +236,22 @@ class ConvergenceMonitor:
         captured = state.captured[np.isfinite(state.captured)]
         max_capture = max(1.0, float(captured.max()) if len(captured) else 1.0)
         bound_rms, bound_max = error_bound(
-            state.unshot, m.patch_area, m.receiver_area, radiosity, self._max_reflectance,
-            max(1.0, self.engine.max_row_sum), max_capture,
+            state.unshot,
+            m.patch_area,
+            m.receiver_area,
+            radiosity,
+            self._max_reflectance,
+            max(1.0, self.engine.max_row_sum),
+            max_capture,
         )
         estimate = error_estimate(
-            state.unshot, m.patch_area, m.patch_reflectance, state.captured,
-            m.receiver_area, m.receiver_reflectance, radiosity,
+            state.unshot,
+            m.patch_area,
+            m.patch_reflectance,
+            state.captured,
+            m.receiver_area,
+            m.receiver_reflectance,
+            radiosity,
         )
         log = self.log
         log.seconds.append(state.seconds)

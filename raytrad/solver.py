@@ -329,7 +329,7 @@ def solve(
     emitted = area @ problem.average(np.arange(mesh.receiver_count), problem.receiver_emission)
     emitted_total = float(emitted.sum())
     start = time.perf_counter() - state.seconds
-    rays_before = state.rays - engine.rays_cast
+    rays_before = state.rays  # from a checkpoint; the engine counts this run's rays
     reason = "no-emission" if emitted_total <= 0 else ""
     residual = 0.0
     while not reason:
@@ -352,6 +352,7 @@ def solve(
         if progress is not None:
             progress(state, residual)
     state.seconds = time.perf_counter() - start
+    state.rays = rays_before + engine.rays_cast
     residual = float((area @ np.abs(state.unshot)).sum()) / emitted_total if emitted_total else 0.0
     radiosity = problem.receiver_emission + problem.receiver_reflectance * state.irradiance
     if not np.isfinite(radiosity).all():

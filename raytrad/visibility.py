@@ -21,6 +21,8 @@ log = logging.getLogger(__name__)
 #: Rays handed to Embree in one call; one chunk's arrays stay a few megabytes.
 RAY_CHUNK = 1 << 16
 
+_MISS, _FRONT, _BACK = 0, 1, 2
+
 
 def worker_count() -> int:
     """Threads for ray batches: every core the process may use."""
@@ -194,27 +196,53 @@ class Occluder:
         -------
         (N,) bool
         """
+        hits = self._hemisphere_hits(points, normals, triangle_normals, double_sided, rays)
+        return (hits == _BACK).all(axis=1)
+
+    def sees_only_front_faces(
+        self,
+        points: np.ndarray,
+        normals: np.ndarray,
+        triangle_normals: np.ndarray,
+        double_sided: np.ndarray,
+        rays: int = 64,
+    ) -> np.ndarray:
+        """(N,) bool: every ray over the hemisphere hits the front of a surface.
+
+        Such a point sees no opening to the outside and no light-swallowing back face, so
+        its form factors must sum to 1 (see ``FormFactorEngine.normalize_closed_rows``).
+        Parameters as :meth:`enclosed`.
+        """
+        hits = self._hemisphere_hits(points, normals, triangle_normals, double_sided, rays)
+        return (hits == _FRONT).all(axis=1)
+
+    def _hemisphere_hits(
+        self,
+        points: np.ndarray,
+        normals: np.ndarray,
+        triangle_normals: np.ndarray,
+        double_sided: np.ndarray,
+        rays: int,
+    ) -> np.ndarray:
+        """(N, rays) int8: _MISS, _FRONT or _BACK for a fixed cosine set of directions."""
         directions = _fibonacci_hemisphere(rays)  # (K, 3) about +z
-        inside = np.ones(len(points), dtype=bool)
         origin = self.to_local(points) + 1e-6 * self.diagonal * normals
         tangent, bitangent = _frames(normals)
+        out = np.empty((len(points), rays), dtype=np.int8)
         for k in range(rays):
             d = (
                 directions[k, 0] * tangent
                 + directions[k, 1] * bitangent
                 + directions[k, 2] * normals
             )
-            todo = np.nonzero(inside)[0]
-            if len(todo) == 0:
-                break
-            hit, _ = self.intersect_local(origin[todo], d[todo])
+            hit, _ = self.intersect_local(origin, d)
             ok = hit >= 0
-            back = np.zeros(len(todo), dtype=bool)
-            back[ok] = (np.einsum("ij,ij->i", triangle_normals[hit[ok]], d[todo][ok]) > 0) & (
+            back = np.zeros(len(hit), dtype=bool)
+            back[ok] = (np.einsum("ij,ij->i", triangle_normals[hit[ok]], d[ok]) > 0) & (
                 ~double_sided[hit[ok]]
             )
-            inside[todo[~back]] = False
-        return inside
+            out[:, k] = np.where(~ok, _MISS, np.where(back, _BACK, _FRONT))
+        return out
 
     def occluded(
         self, starts: np.ndarray, ends: np.ndarray, end_normals: np.ndarray | None = None
