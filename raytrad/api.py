@@ -33,7 +33,7 @@ from raytrad.mesh import MeshSettings, RadiosityMesh, build_mesh
 from raytrad.plot import plot_convergence
 from raytrad.reference import analytic_furnace, dense_solve, reference_from_ply
 from raytrad.scene import Scene, has_emission, triangle_areas_normals
-from raytrad.solver import SolveResult, SolverState, SolveSettings, solve
+from raytrad.solver import SolveResult, SolverState, SolveSettings, check_solvable, solve
 from raytrad.visibility import Occluder, nothing_can_occlude
 
 log = logging.getLogger(__name__)
@@ -94,6 +94,7 @@ class Prepared:
     occluder: Occluder | None
     timings: dict[str, float]
     closed_receivers: np.ndarray | None = None
+    balance: dict[str, float] = field(default_factory=dict)
 
     def close(self) -> None:
         self.engine.close()
@@ -103,8 +104,7 @@ class Prepared:
     def new_engine(self) -> FormFactorEngine:
         """A fresh engine on the same mesh (no cached columns), closed rows normalised."""
         engine = FormFactorEngine(self.mesh, self.occluder, cache_bytes=self.engine.cache_bytes)
-        if self.closed_receivers is not None:
-            engine.normalize_closed_rows(self.closed_receivers)
+        engine.balance(self.closed_receivers)
         return engine
 
 
@@ -185,20 +185,25 @@ def prepare(scene: Scene, settings: RenderSettings | None = None) -> Prepared:
                 return shut_in.enclosed(points, point_normals, normals, scene.double_sided)
 
         mesh = build_mesh(scene, settings.mesh, enclosed)
+    check_solvable(mesh)  # before any form factor is computed
     engine = FormFactorEngine(mesh, occluder, cache_bytes=int(settings.cache_mb * (1 << 20)))
     closed = None
-    if occluder is not None:
-        with _timed(timings, "form_factors"):
+    with _timed(timings, "form_factors"):
+        if occluder is not None:
             _, normals = triangle_areas_normals(scene.triangle_vertices())
             closed = occluder.sees_only_front_faces(
                 engine.evaluation_points, mesh.receiver_normal, normals, scene.double_sided
             )
-            if closed.any():
-                rows = engine.normalize_closed_rows(closed)
-                log.info("form factors of %d receivers that see no opening sum to 1", rows)
-            else:
-                closed = None
-    return Prepared(scene, mesh, engine, occluder, timings, closed)
+        balance = engine.balance(closed)
+    log.info(
+        "form factors: %d closed rows held to 1 (largest miss %.2e), %d patches held to "
+        "capture 1 (largest excess %.2e)",
+        balance["closed_rows"],
+        balance["row_error"],
+        balance["capped_columns"],
+        balance["capture_excess"],
+    )
+    return Prepared(scene, mesh, engine, occluder, timings, closed, balance)
 
 
 def render(
@@ -350,6 +355,7 @@ def build_report(
             "patches": mesh.patch_count,
             "subareas": mesh.subarea_count,
             "occlusion_tested": prepared.occluder is not None,
+            "form_factor_balance": prepared.balance,
         },
         "timings_seconds": timings,
         "solve": {

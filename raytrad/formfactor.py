@@ -245,6 +245,7 @@ class FormFactorEngine:
         self._summed: set[int] = set()
         self.max_row_sum = 0.0
         self._row_scale: np.ndarray | None = None
+        self._col_scale = np.ones(mesh.patch_count)
         diag = float(np.linalg.norm(np.ptp(mesh.positions, axis=0)))
         self.diagonal = diag
         self._points, self._origins = _receiver_points(mesh, RAY_OFFSET * diag)
@@ -274,11 +275,13 @@ class FormFactorEngine:
         return self._points
 
     def column(self, patch: int) -> Column:
-        """F(receiver <- patch) for every receiver that can see it (closed rows normalised)."""
+        """F(receiver <- patch) for every receiver that can see it (balanced, see
+        :meth:`balance`, once that has run)."""
         col = self._raw_column(patch)
         if self._row_scale is None:
             return col
-        return Column(col.receivers, col.factors * self._row_scale[col.receivers], col.rays)
+        scale = self._row_scale[col.receivers] * self._col_scale[patch]
+        return Column(col.receivers, col.factors * scale, col.rays)
 
     def _raw_column(self, patch: int) -> Column:
         cached = self._cache.get(patch)
@@ -298,40 +301,84 @@ class FormFactorEngine:
             self._cached_bytes += size
         return col
 
-    def normalize_closed_rows(
-        self, closed: np.ndarray, progress: Callable[[int, int], None] | None = None
-    ) -> int:
-        """Make the form factors of receivers that see no opening sum to exactly 1.
+    def balance(
+        self,
+        closed: np.ndarray | None,
+        progress: Callable[[int, int], None] | None = None,
+        iterations: int = 100,
+    ) -> dict[str, float]:
+        """Rescale the form factors so that they conserve energy exactly.
 
-        A receiver whose whole hemisphere is covered by front faces (``closed``) has
-        sum_p F_jp = 1 exactly; sampled visibility misses that by a fraction of a percent,
-        and at reflectance 0.999 that is several percent of radiosity, or divergence
-        (REFERENCE.md: the furnace error is about rho delta / (1 - rho)). This computes every
-        column once (they are cached for the solve) and rescales those rows. Rows off by
-        more than 5% are left alone: that is a modelling problem, not sampling noise.
+        Two physical constraints the sampled factors miss by a fraction of a percent:
+
+        * a receiver whose whole hemisphere is covered by front faces (``closed``) has
+          ``sum_p F_jp = 1``;
+        * a patch cannot deliver more power than it shoots: ``g_p = sum_j a_j F_jp / A_p
+          <= 1``.
+
+        At reflectance 0.999 a 0.1% miss is 100% of radiosity (REFERENCE.md: the furnace
+        error is about rho delta / (1 - rho)), and a patch with rho g_p > 1 creates energy
+        each time it shoots, which ambient overshooting amplifies into divergence. This
+        computes every column once (they stay cached for the solve) and alternates row and
+        column scalings (Sinkhorn iteration) until both constraints hold to 1e-12. Rows off
+        by more than 5% are left alone: that is a modelling problem, not sampling noise.
 
         Parameters
         ----------
-        closed : (R,) bool
+        closed : (R,) bool or None
+            Receivers that see no opening; None (a scene where nothing occludes, so the
+            factors are exact) takes rows already summing to 1 within 1e-6.
         progress : callable or None
             ``progress(done, total)`` while columns are computed.
 
         Returns
         -------
-        int, rows rescaled.
+        dict with ``closed_rows`` (rows held to 1), ``capped_columns`` (patches held to
+        g = 1), ``row_error`` and ``capture_excess`` (largest deviations before balancing).
         """
-        total = self.mesh.patch_count
+        mesh = self.mesh
+        total = mesh.patch_count
+        columns = []
         for patch in range(total):
-            self._raw_column(patch)
+            columns.append(self._raw_column(patch))
             if progress is not None:
                 progress(patch + 1, total)
-        sums = self._row_sum
-        fix = closed & (np.abs(sums - 1.0) < 0.05) & (sums > 0)
-        scale = np.ones(self.mesh.receiver_count)
-        scale[fix] = 1.0 / sums[fix]
-        self._row_scale = scale
-        self.max_row_sum = float((sums * scale).max()) if len(sums) else 0.0
-        return int(fix.sum())
+        sums = self._row_sum.copy()
+        if closed is None:
+            closed = np.abs(sums - 1.0) < 1e-6
+        fix_rows = closed & (np.abs(sums - 1.0) < 0.05) & (sums > 0)
+        lengths = np.array([len(c.receivers) for c in columns])
+        rows = np.concatenate([c.receivers for c in columns]) if total else np.zeros(0, int)
+        values = np.concatenate([c.factors for c in columns]) if total else np.zeros(0)
+        owner = np.repeat(np.arange(total), lengths)
+        area = mesh.receiver_area[rows]
+        row_scale = np.ones(mesh.receiver_count)
+        col_scale = np.ones(total)
+        capture0 = np.bincount(owner, weights=area * values, minlength=total) / mesh.patch_area
+        for _ in range(iterations):
+            scaled = values * col_scale[owner]
+            row_sum = np.bincount(rows, weights=scaled, minlength=mesh.receiver_count)
+            row_scale = np.where(fix_rows & (row_sum > 0), 1.0 / np.maximum(row_sum, 1e-300), 1.0)
+            capture = (
+                np.bincount(owner, weights=area * values * row_scale[rows], minlength=total)
+                / mesh.patch_area
+            )
+            new_col = np.ones(total)
+            np.divide(1.0, capture, out=new_col, where=capture > 1.0)
+            done = np.abs(new_col - col_scale).max(initial=0.0) < 1e-12
+            col_scale = new_col
+            if done:
+                break
+        self._row_scale = row_scale
+        self._col_scale = col_scale
+        final = np.bincount(rows, weights=values * col_scale[owner], minlength=mesh.receiver_count)
+        self.max_row_sum = float((final * row_scale).max(initial=0.0))
+        return {
+            "closed_rows": int(fix_rows.sum()),
+            "capped_columns": int((col_scale < 1.0).sum()),
+            "row_error": float(np.abs(sums[fix_rows] - 1.0).max(initial=0.0)),
+            "capture_excess": float(max(0.0, capture0.max(initial=0.0) - 1.0)),
+        }
 
     def _candidates(self, patch: int) -> np.ndarray:
         """Receivers that may exchange light with ``patch`` (cheap conservative culling)."""
