@@ -32,6 +32,7 @@ from raytrad.io.ply import write_radiosity_ply
 from raytrad.mesh import MeshSettings, RadiosityMesh, build_mesh
 from raytrad.plot import plot_convergence
 from raytrad.reference import analytic_furnace, dense_solve, reference_from_ply
+from raytrad.repair import repair_scene
 from raytrad.scene import Scene, has_emission, triangle_areas_normals
 from raytrad.solver import SolveResult, SolverState, SolveSettings, check_solvable, solve
 from raytrad.visibility import Occluder, nothing_can_occlude
@@ -163,12 +164,16 @@ def _timed(timings: dict[str, float], stage: str) -> Iterator[None]:
 
 
 def prepare(scene: Scene, settings: RenderSettings | None = None) -> Prepared:
-    """Mesh ``scene`` and build its visibility structure.
+    """Repair, mesh and balance ``scene``: everything before the first shot.
 
-    No acceleration structure is built when nothing can occlude (a convex enclosure).
+    Duplicate and inside-out faces are fixed (with warnings, :mod:`raytrad.repair`); no
+    acceleration structure is built when nothing can occlude (a convex enclosure); every
+    form-factor column is computed and balanced (:meth:`FormFactorEngine.balance`).
     """
     settings = settings or RenderSettings()
     timings: dict[str, float] = {}
+    with _timed(timings, "mesh"):
+        scene = repair_scene(scene)
     with _timed(timings, "acceleration"):
         used = np.unique(scene.triangles)
         extent = float(np.ptp(scene.positions[used], axis=0).max())
@@ -368,6 +373,7 @@ def build_report(
             "residual": result.residual,
             "seconds": state.seconds,
             "ambient_gain": state.ambient_gain,
+            "divergence_damped": state.damping_events,
         },
         "energy_watts": {
             "emitted": result.emitted_power.tolist(),

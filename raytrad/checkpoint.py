@@ -19,7 +19,7 @@ from raytrad.io.atomic import atomic_write
 from raytrad.solver import SolverState
 
 _ARRAYS = ("irradiance", "patch_radiosity", "shot", "captured", "absorbed", "escaped")
-_SCALARS = ("shots", "rays", "seconds", "ambient_gain", "min_unshot")
+_SCALARS = ("shots", "rays", "seconds", "ambient_gain", "min_unshot", "damping_events")
 
 
 def fingerprint(scene_bytes: bytes, settings: dict[str, Any]) -> str:
@@ -63,4 +63,5 @@ def load_checkpoint(path: Path, key: str) -> SolverState:
         seconds=float(scalars["seconds"]),
         ambient_gain=float(scalars["ambient_gain"]),
         min_unshot=float(scalars["min_unshot"]),
+        damping_events=int(scalars.get("damping_events", 0)),
     )

@@ -106,6 +106,8 @@ class SolverState:
         Power absorbed by receivers and lost to the outside so far [W].
     ambient_gain : float
         Damping of the ambient overshoot (1 = formula 4 as published).
+    damping_events : int
+        Times growth of the unshot power (the sign of divergence) halved the overshoot.
     """
 
     irradiance: np.ndarray
@@ -119,6 +121,7 @@ class SolverState:
     escaped: np.ndarray = field(default_factory=lambda: np.zeros(3))
     ambient_gain: float = 1.0
     min_unshot: float = math.inf
+    damping_events: int = 0
 
     @property
     def unshot(self) -> np.ndarray:
@@ -412,5 +415,6 @@ def _guard_growth(state: SolverState, area: np.ndarray, settings: SolveSettings)
         state.min_unshot = total
     elif total > 4.0 * state.min_unshot and state.ambient_gain > 1e-3:
         state.ambient_gain *= 0.5
+        state.damping_events += 1
         state.min_unshot = total
         log.info("unshot power grew; ambient overshoot damped to %.3g", state.ambient_gain)
