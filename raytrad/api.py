@@ -303,14 +303,15 @@ def render(
         report["reference"] = (
             None if ref is None else {"kind": ref.kind, "description": ref.description}
         )
-        report["convergence"] = error_log.as_dict()
+        columns = error_log.as_dict()  # non-finite values become null (strict JSON)
+        report["convergence"] = columns
         report["error"] = {
-            name: (getattr(error_log, name)[-1] if getattr(error_log, name) else None)
+            name: (columns[name][-1] if columns[name] else None)
             for name in ("estimate", "bound_rms", "bound_max", "true_rms", "true_max")
         }
         report_path = output_dir / "report.json"
         with atomic_write(report_path, "w") as handle:
-            json.dump(report, handle, indent=2)
+            json.dump(report, handle, indent=2, allow_nan=False)
         outputs["report"] = report_path
     finally:
         prepared.close()

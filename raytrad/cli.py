@@ -349,7 +349,7 @@ def _print_summary(report: dict[str, Any]) -> None:
     error = report.get("error") or {}
     if error.get("estimate") is not None:
         text = (
-            f"error      estimate {max(error['estimate']):.2e}, "
+            f"error      estimate {_fmt(max(_finite(error['estimate'])))}, "
             f"bound {_fmt(max(_finite(error['bound_rms'])))}"
         )
         if error.get("true_rms") is not None:

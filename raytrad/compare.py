@@ -14,12 +14,12 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
+from raytrad import reference as references
 from raytrad.api import Prepared, RenderSettings, make_reference, prepare
 from raytrad.convergence import ConvergenceMonitor, ErrorLog, Reference
 from raytrad.errors import SettingsError
 from raytrad.io.atomic import atomic_write
 from raytrad.io.loaders import load_scene
-from raytrad.reference import DENSE_PATCH_LIMIT, DENSE_SIZE_LIMIT
 from raytrad.solver import SHOOTING_METHODS, SolveSettings, solve
 
 log = logging.getLogger(__name__)
@@ -65,7 +65,7 @@ def automatic_reference(prepared: Prepared, settings: RenderSettings) -> Referen
     """A dense solve when it fits in memory, else a long converged ambient run."""
     mesh = prepared.mesh
     size = mesh.patch_count * mesh.receiver_count
-    if mesh.patch_count <= DENSE_PATCH_LIMIT and size <= DENSE_SIZE_LIMIT:
+    if mesh.patch_count <= references.DENSE_PATCH_LIMIT and size <= references.DENSE_SIZE_LIMIT:
         return make_reference("dense", prepared)
     tolerance = min(1e-6, settings.solve.tolerance * 1e-2)
     result = solve(mesh, prepared.engine, SolveSettings("ambient", tolerance=tolerance))
@@ -188,7 +188,7 @@ def _write(output_dir: Path, summary: dict[str, Any], runs: list[MethodRun], tit
     from raytrad.plot import plot_convergence
 
     with atomic_write(output_dir / "compare.json", "w") as handle:
-        json.dump(summary, handle, indent=2, default=_json_default)
+        json.dump(summary, handle, indent=2, default=_json_default, allow_nan=False)
     text = (
         f"# Method comparison: {summary['scene']}\n\n"
         f"{summary['receivers']} receivers, {summary['patches']} patches; true error "
