@@ -12,7 +12,6 @@ import logging
 import math
 import os
 import re
-import struct
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
@@ -20,6 +19,7 @@ import numpy as np
 
 from raytrad.errors import SettingsError
 from raytrad.io.atomic import atomic_write
+from raytrad.io.gltf import TRIANGLES, GltfBuffers, glb_container
 from raytrad.scene import Scene, make_scene
 
 log = logging.getLogger(__name__)
@@ -315,8 +315,6 @@ def write_obj(scene: Scene, obj_path: str | os.PathLike[str]) -> None:
         f.write("\n".join(obj) + "\n")
 
 
-_GL_FLOAT, _GL_UNSIGNED_INT, _GL_TRIANGLES = 5126, 5125, 4
-_GL_ARRAY_BUFFER, _GL_ELEMENT_ARRAY_BUFFER = 34962, 34963
 
 
 def _gltf_material(scene: Scene, i: int, name: str) -> dict[str, object]:
@@ -362,7 +360,7 @@ def write_glb(scene: Scene, glb_path: str | os.PathLike[str]) -> None:
         The ``.glb`` file.
     """
     names = [n or f"material_{i}" for i, n in enumerate(scene.material_names)]
-    gltf = _GltfBuffers()
+    gltf = GltfBuffers()
     meshes: list[dict[str, object]] = []
     for i, name in enumerate(names):
         triangles = scene.triangles[scene.material_index == i]
@@ -371,10 +369,10 @@ def write_glb(scene: Scene, glb_path: str | os.PathLike[str]) -> None:
         used, local = np.unique(triangles.ravel(), return_inverse=True)
         positions = scene.positions[used].astype("<f4")
         primitive = {
-            "attributes": {"POSITION": gltf.add(positions, _GL_ARRAY_BUFFER, "VEC3")},
-            "indices": gltf.add(local.astype("<u4"), _GL_ELEMENT_ARRAY_BUFFER, "SCALAR"),
+            "attributes": {"POSITION": gltf.add(positions, "VEC3")},
+            "indices": gltf.add(local.astype("<u4"), "SCALAR", indices=True),
             "material": i,
-            "mode": _GL_TRIANGLES,
+            "mode": TRIANGLES,
         }
         meshes.append({"name": name, "primitives": [primitive]})
     materials = [_gltf_material(scene, i, n) for i, n in enumerate(names)]
@@ -393,48 +391,6 @@ def write_glb(scene: Scene, glb_path: str | os.PathLike[str]) -> None:
     if any("extensions" in m for m in materials):
         header["extensionsUsed"] = ["KHR_materials_emissive_strength"]
     with atomic_write(glb_path, "wb") as f:
-        f.write(_glb_container(json.dumps(header).encode("utf-8"), binary))
+        f.write(glb_container(json.dumps(header).encode("utf-8"), binary))
 
 
-class _GltfBuffers:
-    """Accessors, buffer views and the bytes of glTF buffer 0, built up array by array."""
-
-    def __init__(self) -> None:
-        self.blobs: list[bytes] = []
-        self.views: list[dict[str, object]] = []
-        self.accessors: list[dict[str, object]] = []
-
-    def add(self, data: np.ndarray, target: int, kind: str) -> int:
-        """Append a float32 (n, 3) or uint32 (n,) array; return its accessor index."""
-        offset = sum(len(b) for b in self.blobs)
-        self.blobs.append(data.tobytes())
-        self.views.append(
-            {"buffer": 0, "byteOffset": offset, "byteLength": data.nbytes, "target": target}
-        )
-        accessor: dict[str, object] = {
-            "bufferView": len(self.views) - 1,
-            "componentType": _GL_FLOAT if data.dtype.kind == "f" else _GL_UNSIGNED_INT,
-            "count": int(data.shape[0]),
-            "type": kind,
-        }
-        if kind == "VEC3":  # glTF requires bounds on POSITION accessors
-            accessor["min"] = data.min(axis=0).tolist()
-            accessor["max"] = data.max(axis=0).tolist()
-        self.accessors.append(accessor)
-        return len(self.accessors) - 1
-
-
-def _glb_container(json_bytes: bytes, binary: bytes) -> bytes:
-    """GLB bytes: 12-byte header, JSON chunk (space-padded), BIN chunk (zero-padded)."""
-    json_bytes += b" " * (-len(json_bytes) % 4)
-    binary += b"\0" * (-len(binary) % 4)
-    total = 12 + 8 + len(json_bytes) + 8 + len(binary)
-    return b"".join(
-        [
-            struct.pack("<4sII", b"glTF", 2, total),
-            struct.pack("<II", len(json_bytes), 0x4E4F534A),
-            json_bytes,
-            struct.pack("<II", len(binary), 0x004E4942),
-            binary,
-        ]
-    )

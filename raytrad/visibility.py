@@ -157,14 +157,33 @@ class Occluder:
         d = np.ascontiguousarray(directions, dtype=np.float32)
         with self._lock:
             self.rays_cast += len(o)
+        triangle, distance, _ = self.intersect_barycentric_local(o, d)
+        return triangle, distance
+
+    def intersect_barycentric_local(
+        self, origins: np.ndarray, directions: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Closest hits with the hit point's barycentric coordinates.
+
+        Returns
+        -------
+        triangle : (N,) int64, -1 for a miss
+        distance : (N,) float64 [m], inf for a miss
+        barycentric : (N, 3) float64, weights of the triangle's corners 0, 1, 2
+        """
+        o = np.ascontiguousarray(origins, dtype=np.float32)
+        d = np.ascontiguousarray(directions, dtype=np.float32)
         triangle = np.empty(len(o), dtype=np.int64)
         distance = np.empty(len(o))
+        weights = np.zeros((len(o), 3))
         for start in range(0, len(o), RAY_CHUNK):
             stop = start + RAY_CHUNK
             hit = self._scene.run(o[start:stop], d[start:stop], query="INTERSECT", output=True)
             triangle[start:stop] = hit["primID"]
             distance[start:stop] = np.where(hit["primID"] >= 0, hit["tfar"], np.inf)
-        return triangle, distance
+            u, v = np.asarray(hit["u"], np.float64), np.asarray(hit["v"], np.float64)
+            weights[start:stop] = np.stack([1.0 - u - v, u, v], axis=1)
+        return triangle, distance, weights
 
     def enclosed(
         self,

@@ -1,0 +1,193 @@
+"""Camera renders of a solution: Embree primary rays, radiance B/pi from the receivers.
+
+The image is the converged radiosity seen through a pinhole camera: each ray's hit point
+on the refined mesh takes the barycentric interpolation of its triangle's receivers, and
+the radiance of a Lambertian surface is B / pi [W sr-1 m-2]. A few stratified samples per
+pixel anti-alias edges.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from raytrad.errors import SettingsError
+from raytrad.mesh import RadiosityMesh
+from raytrad.visibility import Occluder
+
+
+@dataclass(frozen=True)
+class Camera:
+    """A pinhole camera.
+
+    Attributes
+    ----------
+    position : (3,) float [m]
+    look_at : (3,) float [m]
+    up : (3,) float
+    vertical_fov_deg : float [degrees]
+    """
+
+    position: tuple[float, float, float]
+    look_at: tuple[float, float, float]
+    up: tuple[float, float, float] = (0.0, 1.0, 0.0)
+    vertical_fov_deg: float = 39.3
+
+    def __post_init__(self) -> None:
+        forward = np.subtract(self.look_at, self.position)
+        if not np.isfinite(forward).all() or np.linalg.norm(forward) == 0:
+            raise SettingsError("camera position and look_at must differ")
+        if np.linalg.norm(np.cross(forward, self.up)) == 0:
+            raise SettingsError("camera up must not be parallel to the view direction")
+        if not 0 < self.vertical_fov_deg < 180:
+            raise SettingsError(f"vertical field of view must be in (0, 180), got "
+                                f"{self.vertical_fov_deg}")
+
+    def basis(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(right, up, forward) orthonormal vectors of the camera frame."""
+        forward = np.subtract(self.look_at, self.position).astype(np.float64)
+        forward /= np.linalg.norm(forward)
+        right = np.cross(forward, self.up)
+        right /= np.linalg.norm(right)
+        return right, np.cross(right, forward), forward
+
+
+def framing_camera(positions: np.ndarray, vertical_fov_deg: float = 39.3) -> Camera:
+    """A camera looking along +z at the scene's bounding box, far enough to see all of it.
+
+    Suits rooms open toward -z (the Cornell box convention); scene files can give their
+    own camera.
+    """
+    lo, hi = positions.min(axis=0), positions.max(axis=0)
+    centre = 0.5 * (lo + hi)
+    half = 0.5 * (hi - lo)
+    tan = math.tan(math.radians(vertical_fov_deg) / 2.0)
+    distance = max(half[0], half[1]) / tan + half[2]
+    position = (float(centre[0]), float(centre[1]), float(lo[2] - (distance - half[2]) * 1.05))
+    target = (float(centre[0]), float(centre[1]), float(centre[2]))
+    return Camera(position, target, (0.0, 1.0, 0.0), vertical_fov_deg)
+
+
+def twin_triangles(triangles: np.ndarray) -> np.ndarray:
+    """(T,) int64: the reversed copy of each triangle (other side of a two-sided surface),
+    or -1."""
+    key = np.sort(triangles, axis=1)
+    _, inverse, counts = np.unique(key, axis=0, return_inverse=True, return_counts=True)
+    inverse = inverse.reshape(-1)
+    twin = np.full(len(triangles), -1, dtype=np.int64)
+    pairs = counts[inverse] == 2
+    order = np.argsort(inverse[pairs], kind="stable")
+    members = np.nonzero(pairs)[0][order].reshape(-1, 2)
+    twin[members[:, 0]] = members[:, 1]
+    twin[members[:, 1]] = members[:, 0]
+    return twin
+
+
+def render_radiance(
+    mesh: RadiosityMesh,
+    radiosity: np.ndarray,
+    camera: Camera,
+    width: int = 640,
+    height: int = 480,
+    samples: int = 4,
+    seed: int = 0,
+) -> np.ndarray:
+    """Render the radiance of a solution.
+
+    Parameters
+    ----------
+    mesh : RadiosityMesh
+    radiosity : (R, 3) float64
+        Receiver radiosity [W m-2].
+    camera : Camera
+    width, height : int
+        Image size [pixels].
+    samples : int
+        Stratified samples per pixel (rounded down to a square number, at least 1).
+
+    Returns
+    -------
+    (height, width, 3) float32 radiance [W sr-1 m-2]; background 0.
+    """
+    if width < 1 or height < 1:
+        raise SettingsError(f"image size must be positive, got {width}x{height}")
+    side = max(1, math.isqrt(max(1, samples)))
+    right, up, forward = camera.basis()
+    tan = math.tan(math.radians(camera.vertical_fov_deg) / 2.0)
+    aspect = width / height
+    rng = np.random.default_rng(seed)
+    _, normal = _triangle_normals(mesh)
+    twin = twin_triangles(mesh.triangles)
+    image = np.zeros((height, width, 3))
+    occluder = Occluder(mesh.positions, mesh.triangles)
+    try:
+        origin = occluder.to_local(np.asarray(camera.position, dtype=np.float64)[None, :])
+        ys, xs = np.mgrid[0:height, 0:width]
+        for sy in range(side):
+            for sx in range(side):
+                jitter = rng.random((2, height, width))
+                px = (xs + (sx + jitter[0]) / side) / width * 2.0 - 1.0
+                py = 1.0 - (ys + (sy + jitter[1]) / side) / height * 2.0
+                direction = (
+                    forward[None, None, :]
+                    + (px * tan * aspect)[..., None] * right
+                    + (py * tan)[..., None] * up
+                ).reshape(-1, 3)
+                direction /= np.linalg.norm(direction, axis=1)[:, None]
+                hit, _, weights = occluder.intersect_barycentric_local(
+                    np.broadcast_to(origin, direction.shape), direction
+                )
+                image += _shade(hit, weights, direction, mesh, radiosity, normal, twin).reshape(
+                    height, width, 3
+                )
+    finally:
+        occluder.close()
+    return (image / (side * side) / math.pi).astype(np.float32)
+
+
+def _triangle_normals(mesh: RadiosityMesh) -> tuple[np.ndarray, np.ndarray]:
+    corners = mesh.positions[mesh.triangles]
+    cross = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+    length = np.linalg.norm(cross, axis=1)
+    return length, cross / np.maximum(length, 1e-300)[:, None]
+
+
+def _shade(
+    hit: np.ndarray,
+    weights: np.ndarray,
+    direction: np.ndarray,
+    mesh: RadiosityMesh,
+    radiosity: np.ndarray,
+    normal: np.ndarray,
+    twin: np.ndarray,
+) -> np.ndarray:
+    """(N, 3) radiosity seen along each ray: the side of the surface facing the camera.
+
+    A hit on the back of a single-sided surface is black (no light leaves its back); on a
+    two-sided surface it takes the reversed copy, whose corners come in reverse order.
+    """
+    out = np.zeros((len(hit), 3))
+    ok = hit >= 0
+    tri = hit[ok]
+    w = weights[ok]
+    facing = np.einsum("ij,ij->i", normal[tri], direction[ok]) < 0
+    back = ~facing & (twin[tri] >= 0)
+    tri = np.where(back, twin[tri], tri)
+    w = np.where(back[:, None], _reversed_weights(mesh.triangles, hit[ok], tri, w), w)
+    visible = facing | back
+    values = np.einsum("nk,nkc->nc", w, radiosity[mesh.triangle_receivers[tri]])
+    out[np.nonzero(ok)[0][visible]] = values[visible]
+    return out
+
+
+def _reversed_weights(
+    triangles: np.ndarray, hit: np.ndarray, twin: np.ndarray, weights: np.ndarray
+) -> np.ndarray:
+    """Barycentric weights of the same point in the twin triangle (corners permuted)."""
+    out = np.zeros_like(weights)
+    for k in range(3):
+        match = triangles[twin] == triangles[hit][:, k : k + 1]
+        out += match * weights[:, k : k + 1]
+    return out
