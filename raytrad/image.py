@@ -9,49 +9,13 @@ pixel anti-alias edges.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 
 import numpy as np
 
+from raytrad.camera import Camera
 from raytrad.errors import SettingsError
 from raytrad.mesh import RadiosityMesh
 from raytrad.visibility import Occluder
-
-
-@dataclass(frozen=True)
-class Camera:
-    """A pinhole camera.
-
-    Attributes
-    ----------
-    position : (3,) float [m]
-    look_at : (3,) float [m]
-    up : (3,) float
-    vertical_fov_deg : float [degrees]
-    """
-
-    position: tuple[float, float, float]
-    look_at: tuple[float, float, float]
-    up: tuple[float, float, float] = (0.0, 1.0, 0.0)
-    vertical_fov_deg: float = 39.3
-
-    def __post_init__(self) -> None:
-        forward = np.subtract(self.look_at, self.position)
-        if not np.isfinite(forward).all() or np.linalg.norm(forward) == 0:
-            raise SettingsError("camera position and look_at must differ")
-        if np.linalg.norm(np.cross(forward, self.up)) == 0:
-            raise SettingsError("camera up must not be parallel to the view direction")
-        if not 0 < self.vertical_fov_deg < 180:
-            raise SettingsError(f"vertical field of view must be in (0, 180), got "
-                                f"{self.vertical_fov_deg}")
-
-    def basis(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(right, up, forward) orthonormal vectors of the camera frame."""
-        forward = np.subtract(self.look_at, self.position).astype(np.float64)
-        forward /= np.linalg.norm(forward)
-        right = np.cross(forward, self.up)
-        right /= np.linalg.norm(right)
-        return right, np.cross(right, forward), forward
 
 
 def framing_camera(positions: np.ndarray, vertical_fov_deg: float = 39.3) -> Camera:

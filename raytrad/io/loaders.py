@@ -612,10 +612,18 @@ def _srgb_decode(encoded: np.ndarray) -> np.ndarray:
     return np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
 
 
+def _load_toml(path: Path) -> _Collected:
+    """A TOML scene description: meshes, materials, camera (:mod:`raytrad.io.toml_scene`)."""
+    from raytrad.io.toml_scene import collect_toml
+
+    return collect_toml(path)
+
+
 LOADERS: dict[str, Callable[[Path], _Collected]] = {
     ".obj": _load_obj,
     ".gltf": _load_gltf,
     ".glb": _load_glb,
     ".ply": _load_ply,
+    ".toml": _load_toml,
 }
 """Scene loaders by lower-case file suffix; :func:`load_scene` dispatches through this."""

@@ -55,7 +55,7 @@ def _per_material(scene: Scene) -> dict[str, dict[str, Any]]:
 
 
 def test_registry_lists_exactly_the_supported_suffixes() -> None:
-    assert set(LOADERS) == {".obj", ".gltf", ".glb", ".ply"}
+    assert set(LOADERS) == {".obj", ".gltf", ".glb", ".ply", ".toml"}
 
 
 def test_trimesh_is_imported_lazily() -> None:

@@ -1,0 +1,50 @@
+"""A pinhole camera: where an image is seen from (scene files, ``raytrad render --image``)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from raytrad.errors import SettingsError
+
+#: Vertical field of view when none is given [degrees] (the Cornell box camera's).
+DEFAULT_VERTICAL_FOV_DEG = 39.3
+
+
+@dataclass(frozen=True)
+class Camera:
+    """A pinhole camera.
+
+    Attributes
+    ----------
+    position : (3,) float [m]
+    look_at : (3,) float [m]
+    up : (3,) float
+    vertical_fov_deg : float [degrees]
+    """
+
+    position: tuple[float, float, float]
+    look_at: tuple[float, float, float]
+    up: tuple[float, float, float] = (0.0, 1.0, 0.0)
+    vertical_fov_deg: float = DEFAULT_VERTICAL_FOV_DEG
+
+    def __post_init__(self) -> None:
+        forward = np.subtract(self.look_at, self.position)
+        if not np.isfinite(forward).all() or np.linalg.norm(forward) == 0:
+            raise SettingsError("camera position and look_at must differ")
+        if np.linalg.norm(np.cross(forward, self.up)) == 0:
+            raise SettingsError("camera up must not be parallel to the view direction")
+        if not 0 < self.vertical_fov_deg < 180:
+            raise SettingsError(f"vertical field of view must be in (0, 180), got "
+                                f"{self.vertical_fov_deg}")
+
+    def basis(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(right, up, forward) orthonormal vectors of the camera frame."""
+        forward = np.subtract(self.look_at, self.position).astype(np.float64)
+        forward /= np.linalg.norm(forward)
+        right = np.cross(forward, self.up)
+        right /= np.linalg.norm(right)
+        return right, np.cross(right, forward), forward
+
+

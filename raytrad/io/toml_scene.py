@@ -1,0 +1,698 @@
+"""TOML scene descriptions: what OBJ, glTF and PLY files cannot say.
+
+A ``.toml`` scene places mesh files (``[[mesh]]``, each with a transform), overrides their
+materials by name with RGB numbers, measured spectra, ColorChecker patches, emitters given
+by exitance, radiance, radiant power or luminous flux and coloured by a blackbody
+temperature, a standard illuminant or RGB, and adds a ``[camera]`` and ``[output]``
+settings. The schema, with a complete example, is in ``docs/scene-files.md``.
+
+Every key is checked: a key nothing reads, a value of the wrong type or range, or a missing
+mesh file is a :class:`~raytrad.errors.SceneError` naming the TOML file and the dotted key
+(``mesh[0].materials.white.reflectance``). colour-science is imported (through
+:mod:`raytrad.colour_adapter`) only when the file uses a spectral or photometric colour:
+a spectrum, a named reflectance, a colour temperature or a named illuminant.
+
+Units: coordinates [m]; reflectance [1] linear RGB; exitance [W m-2]; radiance
+[W sr-1 m-2]; power [W]; luminous flux [lm]; temperature [K]; angles [degrees].
+"""
+
+from __future__ import annotations
+
+import difflib
+import json
+import logging
+import math
+import os
+import re
+import tomllib
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from raytrad import colour_adapter
+from raytrad.camera import DEFAULT_VERTICAL_FOV_DEG, Camera
+from raytrad.errors import SceneError, SettingsError
+from raytrad.io.loaders import _Collected, _compact, _Material, load_scene
+from raytrad.scene import Scene, triangle_areas_normals
+
+log = logging.getLogger(__name__)
+
+TOP_KEYS = ("mesh", "materials", "camera", "output")
+"""Keys allowed at the top level of a scene file."""
+
+MESH_KEYS = ("file", "transform", "translate", "rotate_deg", "scale", "materials")
+"""Keys allowed in each ``[[mesh]]`` table."""
+
+REFLECTANCE_KEYS = ("reflectance", "reflectance_spectrum", "reflectance_named")
+"""Ways to give a material's reflectance (at most one per material)."""
+
+AMOUNT_KEYS = ("exitance", "radiance", "power_w", "flux_lm")
+"""Ways to give how much a material emits (at most one per material)."""
+
+COLOUR_KEYS = tuple(colour_adapter.EMITTER_COLOURS)
+"""Ways to give an emitter's colour (at most one; needs an amount key)."""
+
+MATERIAL_KEYS = (*REFLECTANCE_KEYS, "double_sided", *AMOUNT_KEYS, *COLOUR_KEYS)
+"""Keys allowed in ``[materials.NAME]`` and ``[mesh.materials.NAME]`` tables."""
+
+SPECTRUM_KEYS = ("wavelengths", "values")
+"""Keys of a ``reflectance_spectrum`` table."""
+
+CAMERA_KEYS = ("position", "look_at", "up", "vertical_fov_deg")
+"""Keys allowed in ``[camera]``."""
+
+TEMPERATURE_RANGE_K = (1000.0, 40000.0)
+"""Accepted blackbody colour temperatures [K]."""
+
+
+
+@dataclass(frozen=True)
+class OutputKey:
+    """One accepted ``[output]`` key: its type, range and meaning (with unit)."""
+
+    kind: type[int] | type[float]
+    low: float
+    high: float
+    low_open: bool
+    description: str
+
+
+OUTPUT_KEYS: dict[str, OutputKey] = {
+    "exposure": OutputKey(
+        float, -math.inf, math.inf, False, "extra exposure of display colours [EV]"
+    ),
+    "lightmap_resolution": OutputKey(
+        int, 1, 16384, False, "texels along each side of the lightmap atlas [1]"
+    ),
+    "texel_density": OutputKey(float, 0.0, math.inf, True, "lightmap texels per metre [m-1]"),
+    "image_width": OutputKey(int, 1, 16384, False, "camera image width [px]"),
+    "image_height": OutputKey(int, 1, 16384, False, "camera image height [px]"),
+}
+"""Keys accepted in ``[output]``; their values are stored, validated, for the caller."""
+
+
+@dataclass(frozen=True)
+class SceneDescription:
+    """A loaded TOML scene file.
+
+    Attributes
+    ----------
+    scene : Scene
+        The validated scene, ``source`` the TOML file.
+    camera : Camera or None
+        The ``[camera]`` table, positions times the load ``scale`` [m]; None without one.
+    output : dict
+        The ``[output]`` values by key of :data:`OUTPUT_KEYS` (only those the file gives).
+    """
+
+    scene: Scene
+    camera: Camera | None
+    output: dict[str, float | int] = field(default_factory=dict)
+
+
+def load_scene_description(path: str | os.PathLike[str], scale: float = 1.0) -> SceneDescription:
+    """Load a TOML scene file with its camera and output settings.
+
+    Parameters
+    ----------
+    path : path-like
+        The ``.toml`` file; mesh files are found relative to its directory.
+    scale : float
+        Multiplies every position, the camera's included [m per scene unit]; scene files
+        are in metres, so normally 1.
+
+    Returns
+    -------
+    SceneDescription
+
+    Raises
+    ------
+    SceneError
+        Naming the TOML file and, where one is at fault, the dotted key: unparseable TOML,
+        unknown keys, wrong types or ranges, missing or unloadable mesh files (naming both
+        files), material names no mesh has.
+    SettingsError
+        If ``scale`` is not a finite positive number.
+    """
+    path = Path(path)
+    scale = float(scale)
+    if not (math.isfinite(scale) and scale > 0.0):
+        raise SettingsError(f"scale must be a finite number > 0, not {scale}")
+    if not path.exists():
+        raise SceneError(path, "file not found")
+    if not path.is_file():
+        raise SceneError(path, "not a regular file")
+    description = _describe(_parse(path), scale)
+    log.info(
+        "%s: %d triangles, %d materials, %s",
+        path,
+        description.scene.triangle_count,
+        len(description.scene.material_names),
+        "a camera" if description.camera is not None else "no camera",
+    )
+    return description
+
+
+# --------------------------------------------------------------------------- keys and values
+
+
+_BARE_KEY = re.compile(r"^[A-Za-z0-9_-]+$")
+
+
+@dataclass(frozen=True)
+class _Key:
+    """A dotted key inside one TOML file, for error messages."""
+
+    file: Path
+    dotted: str = ""
+
+    def __truediv__(self, name: str) -> _Key:
+        part = name if _BARE_KEY.match(name) else json.dumps(name)
+        return _Key(self.file, f"{self.dotted}.{part}" if self.dotted else part)
+
+    def index(self, i: int) -> _Key:
+        return _Key(self.file, f"{self.dotted}[{i}]")
+
+    def error(self, problem: str) -> SceneError:
+        return SceneError(self.file, f"{self.dotted}: {problem}")
+
+
+def _show(value: Any) -> str:
+    """A TOML value as a short string for messages."""
+    text = json.dumps(value) if isinstance(value, str | list | bool) else repr(value)
+    return text if len(text) <= 60 else text[:57] + "..."
+
+
+def _table(key: _Key, value: Any, allowed: Iterable[str]) -> dict[str, Any]:
+    """``value`` as a table whose keys are all in ``allowed``."""
+    if not isinstance(value, dict):
+        raise key.error(f"expected a table, got {_show(value)}")
+    allowed = tuple(allowed)
+    for name in value:
+        if name not in allowed:
+            close = difflib.get_close_matches(name, allowed, n=1)
+            hint = f"did you mean {close[0]!r}?" if close else f"allowed: {', '.join(allowed)}"
+            raise SceneError(key.file, f"unknown key '{(key / name).dotted}' ({hint})")
+    return value
+
+
+def _required(key: _Key, table: dict[str, Any], name: str) -> Any:
+    if name not in table:
+        raise SceneError(key.file, f"missing key '{(key / name).dotted}'")
+    return table[name]
+
+
+def _one_of(key: _Key, table: dict[str, Any], names: Iterable[str]) -> str | None:
+    """The one key of ``names`` the table gives, None if none; an error if several."""
+    given = [n for n in names if n in table]
+    if len(given) > 1:
+        raise (key / given[1]).error(f"cannot be combined with '{(key / given[0]).dotted}'")
+    return given[0] if given else None
+
+
+def _is_number(value: Any) -> bool:
+    return isinstance(value, int | float) and not isinstance(value, bool)
+
+
+def _number(
+    key: _Key,
+    value: Any,
+    low: float = -math.inf,
+    high: float = math.inf,
+    low_open: bool = False,
+) -> float:
+    """A finite number in [low, high] (or (low, high] with ``low_open``)."""
+    if not _is_number(value):
+        raise key.error(f"expected a number, got {_show(value)}")
+    number = float(value)
+    below = number <= low if low_open else number < low
+    if not math.isfinite(number) or below or number > high:
+        opening = "(" if low_open else "["
+        raise key.error(f"{number:g} is outside {opening}{low:g}, {high:g}]")
+    return number
+
+
+def _numbers(
+    key: _Key, value: Any, count: int | None, low: float = -math.inf, high: float = math.inf
+) -> np.ndarray:
+    """(count,) float64 from a list of finite numbers in [low, high]; any length >= 2 if None."""
+    wanted = f"a list of {count} numbers" if count else "a list of numbers"
+    if not isinstance(value, list) or not all(_is_number(v) for v in value):
+        raise key.error(f"expected {wanted}, got {_show(value)}")
+    if (count is not None and len(value) != count) or (count is None and len(value) < 2):
+        raise key.error(f"expected {wanted if count else 'at least 2 numbers'}, got {len(value)}")
+    array = np.array(value, dtype=np.float64)
+    bad = ~np.isfinite(array) | (array < low) | (array > high)
+    if bad.any():
+        raise key.error(f"{array[bad][0]:g} is outside [{low:g}, {high:g}]")
+    return array
+
+
+def _rgb(key: _Key, value: Any, low: float = 0.0, high: float = math.inf) -> np.ndarray:
+    """(3,) float64 from one number (grey) or three, each in [low, high]."""
+    if _is_number(value):
+        return np.full(3, _number(key, value, low, high))
+    if isinstance(value, list):
+        return _numbers(key, value, 3, low, high)
+    raise key.error(f"expected a number or a list of 3 numbers, got {_show(value)}")
+
+
+def _string(key: _Key, value: Any) -> str:
+    if not isinstance(value, str):
+        raise key.error(f"expected a string, got {_show(value)}")
+    return value
+
+
+def _boolean(key: _Key, value: Any) -> bool:
+    if not isinstance(value, bool):
+        raise key.error(f"expected true or false, got {_show(value)}")
+    return value
+
+
+def _colorimetry(key: _Key, function: Callable[..., np.ndarray], *args: Any) -> np.ndarray:
+    """Call a :mod:`raytrad.colour_adapter` function, its ValueError naming the key."""
+    try:
+        return np.asarray(function(*args), dtype=np.float64)
+    except ValueError as exc:
+        raise key.error(str(exc)) from None
+
+
+def _triple(values: np.ndarray) -> tuple[float, float, float]:
+    return (float(values[0]), float(values[1]), float(values[2]))
+
+
+# --------------------------------------------------------------------------- materials
+
+
+@dataclass(frozen=True, eq=False)
+class _Emission:
+    """An emission definition; power and flux wait for the area they spread over.
+
+    ``exitance`` [W m-2] is final when the file gives exitance or radiance; otherwise
+    ``power_w`` [W] or ``flux_lm`` [lm] is spread over the area of every face this
+    definition ends up on, in the colour ``rgb`` (luminance 1).
+    """
+
+    key: _Key
+    rgb: tuple[float, float, float]
+    exitance: tuple[float, float, float] | None = None
+    power_w: float | None = None
+    flux_lm: float | None = None
+
+
+@dataclass(frozen=True)
+class _Override:
+    """The material properties one TOML table sets; None where it leaves the file's value."""
+
+    reflectance: tuple[float, float, float] | None = None
+    double_sided: bool | None = None
+    emission: _Emission | None = None
+
+
+def _parse_material(key: _Key, value: Any) -> _Override:
+    """A ``[materials.NAME]`` or ``[mesh.materials.NAME]`` table."""
+    table = _table(key, value, MATERIAL_KEYS)
+    double_sided = None
+    if "double_sided" in table:
+        double_sided = _boolean(key / "double_sided", table["double_sided"])
+    return _Override(_parse_reflectance(key, table), double_sided, _parse_emission(key, table))
+
+
+def _parse_reflectance(key: _Key, table: dict[str, Any]) -> tuple[float, float, float] | None:
+    which = _one_of(key, table, REFLECTANCE_KEYS)
+    if which is None:
+        return None
+    where = key / which
+    value = table[which]
+    if which == "reflectance":
+        return _triple(_rgb(where, value, 0.0, 1.0))
+    if which == "reflectance_spectrum":
+        spectrum = _table(where, value, SPECTRUM_KEYS)
+        wavelengths = _numbers(
+            where / "wavelengths", _required(where, spectrum, "wavelengths"), None, 0.0
+        )
+        values = _numbers(
+            where / "values", _required(where, spectrum, "values"), len(wavelengths), 0.0, 1.0
+        )
+        rgb = _colorimetry(where, colour_adapter.reflectance_to_rgb, wavelengths, values)
+    else:
+        name = _string(where, value)
+        spectrum_nm = _colorimetry(where, lambda: np.stack(colour_adapter.named_reflectance(name)))
+        rgb = _colorimetry(where, colour_adapter.reflectance_to_rgb, *spectrum_nm)
+    clipped = np.clip(rgb, 0.0, 1.0)
+    if not np.array_equal(clipped, rgb):
+        log.warning(
+            "%s: %s: linear RGB %s is outside [0, 1] (outside the BT.709 gamut); clipped",
+            key.file,
+            where.dotted,
+            np.round(rgb, 4).tolist(),
+        )
+    return _triple(clipped)
+
+
+def _parse_emission(key: _Key, table: dict[str, Any]) -> _Emission | None:
+    amount = _one_of(key, table, AMOUNT_KEYS)
+    colour_kind = _one_of(key, table, COLOUR_KEYS)
+    if amount is None:
+        if colour_kind is not None:
+            raise (key / colour_kind).error(
+                f"an emission colour needs an amount: add one of {', '.join(AMOUNT_KEYS)}"
+            )
+        return None
+    rgb = np.ones(3)
+    if colour_kind is not None:
+        where = key / colour_kind
+        value = table[colour_kind]
+        if colour_kind == "temperature_k":
+            value = _number(where, value, *TEMPERATURE_RANGE_K)
+        elif colour_kind == "illuminant":
+            value = _string(where, value)
+        else:
+            value = _rgb(where, value)
+        rgb = _colorimetry(where, colour_adapter.emitter_rgb, colour_kind, value)
+    where = key / amount
+    value = table[amount]
+    if amount in ("exitance", "radiance"):
+        if isinstance(value, list) and colour_kind is not None:
+            raise where.error(
+                f"an RGB {amount} has its own colour; give one number with "
+                f"'{(key / colour_kind).dotted}'"
+            )
+        exitance = _rgb(where, value) * rgb
+        if amount == "radiance":
+            exitance = math.pi * exitance  # Lambertian: E = pi L
+        return _Emission(key, _triple(rgb), exitance=_triple(exitance))
+    number = _number(where, value, 0.0)
+    if amount == "power_w":
+        return _Emission(key, _triple(rgb), power_w=number)
+    return _Emission(key, _triple(rgb), flux_lm=number)
+
+
+# --------------------------------------------------------------------------- meshes
+
+
+@dataclass(frozen=True, eq=False)
+class _Part:
+    """The faces of one material of one placed mesh.
+
+    ``positions`` (n, 3) float64 [m, before the load scale], ``triangles`` (t, 3) int64,
+    ``area`` their total area [m2, before the load scale], and the resolved material
+    (its emitted exitance final unless ``emission`` spreads a power or flux).
+    """
+
+    positions: np.ndarray
+    triangles: np.ndarray
+    area: float
+    material: _Material
+    emission: _Emission | None
+
+
+def _rotation(axis: int, degrees: float) -> np.ndarray:
+    """(3, 3) rotation by ``degrees`` about coordinate axis 0, 1 or 2 (right-handed)."""
+    c, s = math.cos(math.radians(degrees)), math.sin(math.radians(degrees))
+    i, j = [(1, 2), (2, 0), (0, 1)][axis]
+    matrix = np.eye(3)
+    matrix[i, i], matrix[i, j], matrix[j, i], matrix[j, j] = c, -s, s, c
+    return matrix
+
+
+def _parse_transform(key: _Key, table: dict[str, Any]) -> np.ndarray:
+    """(4, 4) ``world_from_file``: ``transform``, or ``translate`` . Rz Ry Rx . ``scale``."""
+    parts = [k for k in ("translate", "rotate_deg", "scale") if k in table]
+    world_from_file = np.eye(4)
+    if "transform" in table:
+        if parts:
+            raise (key / parts[0]).error(f"cannot be combined with '{(key / 'transform').dotted}'")
+        where = key / "transform"
+        rows = table["transform"]
+        if not isinstance(rows, list) or len(rows) != 4:
+            raise where.error(f"expected 4 rows of 4 numbers (row-major), got {_show(rows)}")
+        world_from_file = np.stack([_numbers(where.index(i), r, 4) for i, r in enumerate(rows)])
+        if not np.array_equal(world_from_file[3], [0.0, 0.0, 0.0, 1.0]):
+            raise where.error(
+                f"the last row must be [0, 0, 0, 1] (an affine transform), got "
+                f"{world_from_file[3].tolist()}"
+            )
+    else:
+        if "scale" in table:
+            factors = _rgb(key / "scale", table["scale"], -math.inf)
+            world_from_file[:3, :3] = np.diag(factors)
+        if "rotate_deg" in table:
+            angles = _numbers(key / "rotate_deg", table["rotate_deg"], 3)
+            rotation = _rotation(2, angles[2]) @ _rotation(1, angles[1]) @ _rotation(0, angles[0])
+            world_from_file[:3, :3] = rotation @ world_from_file[:3, :3]
+        if "translate" in table:
+            world_from_file[:3, 3] = _numbers(key / "translate", table["translate"], 3)
+    determinant = float(np.linalg.det(world_from_file[:3, :3]))
+    if not (math.isfinite(determinant) and abs(determinant) > 1e-12):
+        where = key / ("transform" if "transform" in table else "scale")
+        raise where.error("the transform is singular (it flattens the mesh)")
+    return world_from_file
+
+
+def _load_mesh(key: _Key, table: dict[str, Any]) -> tuple[Path, Scene]:
+    """The mesh file of a ``[[mesh]]`` table, loaded; errors name both files."""
+    where = key / "file"
+    name = _string(where, _required(key, table, "file"))
+    mesh_path = key.file.parent / name
+    if mesh_path.suffix.lower() == ".toml":
+        raise where.error(f"{name!r}: a scene file cannot include another TOML scene")
+    if not mesh_path.is_file():
+        raise where.error(f"mesh file {str(mesh_path)!r} not found")
+    try:
+        return mesh_path, load_scene(mesh_path)
+    except SceneError as exc:
+        raise where.error(f"cannot load mesh file: {exc}") from None
+
+
+def _overlay(material: _Material, override: _Override | None) -> tuple[_Material, _Emission | None]:
+    """``material`` with what ``override`` sets; the emission when it still needs an area."""
+    if override is None:
+        return material, None
+    if override.reflectance is not None:
+        material = replace(material, reflectance=override.reflectance)
+    if override.double_sided is not None:
+        material = replace(material, double_sided=override.double_sided)
+    emission = override.emission
+    if emission is not None and emission.exitance is not None:
+        return replace(material, emitted_exitance=emission.exitance), None
+    return material, emission
+
+
+def _parse_mesh(
+    key: _Key, value: Any, shared: dict[str, _Override]
+) -> tuple[list[_Part], set[str]]:
+    """The placed parts of one ``[[mesh]]`` and the material names its file has."""
+    table = _table(key, value, MESH_KEYS)
+    world_from_file = _parse_transform(key, table)
+    overrides_key = key / "materials"
+    overrides = {
+        name: _parse_material(overrides_key / name, spec)
+        for name, spec in _table(
+            overrides_key, table.get("materials", {}), _any_name(table.get("materials"))
+        ).items()
+    }
+    mesh_path, mesh = _load_mesh(key, table)
+    names = set(mesh.material_names)
+    for name in overrides:
+        if name not in names:
+            raise (overrides_key / name).error(
+                f"{mesh_path.name!r} has no material of this name "
+                f"(it has: {', '.join(sorted(names))})"
+            )
+    positions = mesh.positions @ world_from_file[:3, :3].T + world_from_file[:3, 3]
+    triangles = mesh.triangles
+    if np.linalg.det(world_from_file[:3, :3]) < 0.0:  # a mirror: keep the front side lit
+        triangles = triangles[:, ::-1]
+    areas, _ = triangle_areas_normals(positions[triangles])
+    parts = []
+    for index, name in enumerate(mesh.material_names):
+        mine = mesh.material_index == index
+        if not mine.any():
+            continue
+        material = _Material(
+            name,
+            _triple(mesh.material_reflectance[index]),
+            _triple(mesh.material_emitted_exitance[index]),
+            bool(mesh.material_double_sided[index]),
+        )
+        material, pending = _overlay(material, shared.get(name))
+        override = overrides.get(name)
+        if override is not None:
+            material, own = _overlay(material, override)
+            if override.emission is not None:  # the mesh's emission replaces the shared one
+                pending = own
+        local_positions, local_triangles = _compact(positions, triangles[mine])
+        parts.append(
+            _Part(local_positions, local_triangles, float(areas[mine].sum()), material, pending)
+        )
+    return parts, names
+
+
+def _any_name(value: Any) -> tuple[str, ...]:
+    """Every key of a table whose keys are names (material overrides)."""
+    return tuple(value) if isinstance(value, dict) else ()
+
+
+# --------------------------------------------------------------------------- camera, output
+
+
+def _parse_camera(key: _Key, value: Any) -> Camera:
+    table = _table(key, value, CAMERA_KEYS)
+    position = _numbers(key / "position", _required(key, table, "position"), 3)
+    look_at = _numbers(key / "look_at", _required(key, table, "look_at"), 3)
+    up = _numbers(key / "up", table.get("up", [0.0, 1.0, 0.0]), 3)
+    fov = DEFAULT_VERTICAL_FOV_DEG
+    if "vertical_fov_deg" in table:
+        fov = _number(key / "vertical_fov_deg", table["vertical_fov_deg"], 0.0, 180.0, True)
+        if fov >= 180.0:
+            raise (key / "vertical_fov_deg").error(f"{fov:g} is outside (0, 180)")
+    forward = look_at - position
+    if np.linalg.norm(forward) == 0.0:
+        raise (key / "look_at").error(f"equals '{(key / 'position').dotted}'")
+    if np.linalg.norm(np.cross(forward, up)) <= 1e-12 * np.linalg.norm(forward):
+        raise (key / "up").error("is zero or parallel to the view direction")
+    return Camera(_triple(position), _triple(look_at), _triple(up), fov)
+
+
+def _parse_output(key: _Key, value: Any) -> dict[str, float | int]:
+    table = _table(key, value, OUTPUT_KEYS)
+    output: dict[str, float | int] = {}
+    for name, given in table.items():
+        spec, where = OUTPUT_KEYS[name], key / name
+        if spec.kind is int and not (isinstance(given, int) and not isinstance(given, bool)):
+            raise where.error(f"expected an integer, got {_show(given)}")
+        number = _number(where, given, spec.low, spec.high, spec.low_open)
+        output[name] = int(given) if spec.kind is int else number
+    return output
+
+
+# --------------------------------------------------------------------------- the file
+
+
+@dataclass(frozen=True, eq=False)
+class _Parsed:
+    """A checked scene file whose power and flux emitters still need the load scale."""
+
+    path: Path
+    parts: list[_Part]
+    camera: Camera | None
+    output: dict[str, float | int]
+
+
+def _read_toml(path: Path) -> dict[str, Any]:
+    try:
+        with path.open("rb") as f:
+            return tomllib.load(f)
+    except tomllib.TOMLDecodeError as exc:
+        raise SceneError(path, f"cannot parse as TOML: {exc}") from None
+    except UnicodeDecodeError as exc:
+        raise SceneError(path, f"cannot parse as TOML: not UTF-8 text ({exc.reason})") from None
+    except OSError as exc:
+        raise SceneError(path, f"cannot read the file: {exc.strerror or exc}") from exc
+
+
+def _parse(path: Path) -> _Parsed:
+    """Read and check a TOML scene file and load and place its meshes."""
+    root = _Key(path)
+    document = _table(root, _read_toml(path), TOP_KEYS)
+    materials_key = root / "materials"
+    shared = {
+        name: _parse_material(materials_key / name, spec)
+        for name, spec in _table(
+            materials_key, document.get("materials", {}), _any_name(document.get("materials"))
+        ).items()
+    }
+    meshes = _required(root, document, "mesh")
+    if not isinstance(meshes, list) or not meshes:
+        raise (root / "mesh").error("expected one or more [[mesh]] tables")
+    parts: list[_Part] = []
+    found: set[str] = set()
+    for i, mesh in enumerate(meshes):
+        mesh_parts, names = _parse_mesh((root / "mesh").index(i), mesh, shared)
+        parts.extend(mesh_parts)
+        found |= names
+    for name in shared:
+        if name not in found:
+            raise (materials_key / name).error(
+                f"no mesh has a material of this name (they have: {', '.join(sorted(found))})"
+            )
+    camera = _parse_camera(root / "camera", document["camera"]) if "camera" in document else None
+    output = _parse_output(root / "output", document.get("output", {}))
+    return _Parsed(path, parts, camera, output)
+
+
+def _describe(parsed: _Parsed, scale: float) -> SceneDescription:
+    """The scene at ``scale`` [m per scene unit], power and flux spread over scaled areas."""
+    emitting_area: dict[_Emission, float] = {}
+    for part in parsed.parts:
+        if part.emission is not None:
+            sides = 2.0 if part.material.double_sided else 1.0
+            area = part.area * scale * scale * sides
+            emitting_area[part.emission] = emitting_area.get(part.emission, 0.0) + area
+    collected = _Collected(parsed.path)
+    for part in parsed.parts:
+        material, emission = part.material, part.emission
+        if emission is not None:
+            convert = (
+                colour_adapter.exitance_from_power
+                if emission.power_w is not None
+                else colour_adapter.exitance_from_flux
+            )
+            amount = emission.power_w if emission.power_w is not None else emission.flux_lm
+            exitance = _colorimetry(
+                emission.key, convert, amount, emitting_area[emission], emission.rgb
+            )
+            material = replace(material, emitted_exitance=_triple(exitance))
+        collected.add(part.positions, part.triangles, material)
+    scene = collected.to_scene(scale)
+    camera = parsed.camera
+    if camera is not None and scale != 1.0:
+        camera = replace(
+            camera,
+            position=_triple(np.multiply(camera.position, scale)),
+            look_at=_triple(np.multiply(camera.look_at, scale)),
+        )
+    return SceneDescription(scene, camera, dict(parsed.output))
+
+
+@dataclass
+class _TomlCollected(_Collected):
+    """What :data:`raytrad.io.loaders.LOADERS` gets for a ``.toml`` file.
+
+    The power and flux of emitters depend on the areas after ``load_scene``'s scale, so the
+    scene is built in :meth:`to_scene`, when the scale is known.
+    """
+
+    parsed: _Parsed | None = None
+
+    def to_scene(self, scale: float) -> Scene:
+        assert self.parsed is not None
+        return _describe(self.parsed, scale).scene
+
+
+def collect_toml(path: Path) -> _Collected:
+    """The :data:`~raytrad.io.loaders.LOADERS` entry for ``.toml`` scene files."""
+    return _TomlCollected(path, parsed=_parse(path))
+
+
+__all__ = [
+    "AMOUNT_KEYS",
+    "CAMERA_KEYS",
+    "COLOUR_KEYS",
+    "MATERIAL_KEYS",
+    "MESH_KEYS",
+    "OUTPUT_KEYS",
+    "REFLECTANCE_KEYS",
+    "SPECTRUM_KEYS",
+    "TEMPERATURE_RANGE_K",
+    "TOP_KEYS",
+    "Camera",
+    "OutputKey",
+    "SceneDescription",
+    "collect_toml",
+    "load_scene_description",
+]
