@@ -21,14 +21,27 @@ from typing import Any
 import numpy as np
 
 from raytrad import __version__
+from raytrad.camera import Camera
 from raytrad.checkpoint import fingerprint, load_checkpoint, save_checkpoint
 from raytrad.convergence import ConvergenceMonitor, ErrorLog, Reference
-from raytrad.display import display_colors
+from raytrad.display import auto_exposure, display_colors
 from raytrad.errors import RaytradError, SettingsError
 from raytrad.formfactor import FormFactorEngine
+from raytrad.image import framing_camera, render_radiance
 from raytrad.io.atomic import atomic_write
+from raytrad.io.exr import display_encode, encode_png, write_exr, write_png
+from raytrad.io.gltf import write_baked_glb
 from raytrad.io.loaders import load_scene
 from raytrad.io.ply import write_radiosity_ply
+from raytrad.lightmap import (
+    Lightmap,
+    LightmapSettings,
+    bake_lightmap,
+    lightmap_preview,
+    lightmap_vertices,
+    write_lightmap,
+    write_lightmap_preview,
+)
 from raytrad.mesh import MeshSettings, RadiosityMesh, build_mesh
 from raytrad.plot import plot_convergence
 from raytrad.reference import analytic_furnace, dense_solve, reference_from_ply
@@ -38,6 +51,30 @@ from raytrad.solver import SolveResult, SolverState, SolveSettings, check_solvab
 from raytrad.visibility import Occluder, nothing_can_occlude
 
 log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class ImageSettings:
+    """A camera render of the solution (``raytrad render --image``).
+
+    Attributes
+    ----------
+    width, height : int
+        Image size [pixels].
+    samples : int
+        Samples per pixel (stratified; rounded down to a square).
+    camera : Camera or None
+        None: the scene file's camera, else an automatic framing.
+    """
+
+    width: int = 640
+    height: int = 480
+    samples: int = 4
+    camera: Camera | None = None
+
+    def __post_init__(self) -> None:
+        if self.width < 1 or self.height < 1 or self.samples < 1:
+            raise SettingsError("image width, height and samples must be at least 1")
 
 
 @dataclass(frozen=True)
@@ -58,6 +95,12 @@ class RenderSettings:
         Memory for cached form-factor columns [MiB].
     checkpoint_seconds : float
         Seconds between checkpoints of a long solve.
+    lightmap : LightmapSettings or None
+        Bake and write an EXR lightmap (and its preview PNG).
+    image : ImageSettings or None
+        Render the solution from a camera (linear EXR and display PNG).
+    gltf : bool
+        Write the baked model as ``.glb``.
     """
 
     mesh: MeshSettings = field(default_factory=MeshSettings)
@@ -66,6 +109,9 @@ class RenderSettings:
     exposure: float = 0.0
     cache_mb: float = 1024.0
     checkpoint_seconds: float = 60.0
+    lightmap: LightmapSettings | None = None
+    image: ImageSettings | None = None
+    gltf: bool = False
 
     def __post_init__(self) -> None:
         if not (self.scale > 0 and np.isfinite(self.scale)):
@@ -252,7 +298,7 @@ def render(
     output_dir = Path(output_dir)
     timings: dict[str, float] = {}
     with _timed(timings, "load"):
-        scene = load_scene(scene_path, scale=settings.scale)
+        scene, camera = _load(scene_path, settings.scale)
     if not has_emission(scene):
         log.warning("%s: the scene has no emitter; every radiosity is zero", scene_path)
     prepared = prepare(scene, settings)
@@ -290,7 +336,7 @@ def render(
             result = solve(prepared.mesh, prepared.engine, settings.solve, state, on_shot, stop)
         error_log = monitor.finish(result.state)
         with _timed(timings, "write"):
-            outputs = _write_outputs(prepared, result, output_dir, stem, settings)
+            outputs, facts = _write_outputs(prepared, result, output_dir, stem, settings, camera)
             if plot:
                 outputs["plot"] = output_dir / "convergence.png"
                 plot_convergence(outputs["plot"], {result.method: error_log}, str(scene_path))
@@ -300,6 +346,7 @@ def render(
         elif checkpoint.exists():
             checkpoint.unlink()
         report = build_report(scene_path, prepared, result, settings, timings, outputs)
+        report["outputs_detail"] = facts
         report["reference"] = (
             None if ref is None else {"kind": ref.kind, "description": ref.description}
         )
@@ -318,17 +365,94 @@ def render(
     return RenderOutcome(result, prepared, outputs, report, error_log)
 
 
+def _load(path: Path, scale: float) -> tuple[Scene, Camera | None]:
+    """The scene, and the camera a TOML scene file gives (None for other formats)."""
+    if path.suffix.lower() == ".toml" and path.is_file():
+        from raytrad.io.toml_scene import load_scene_description
+
+        description = load_scene_description(path, scale=scale)
+        return description.scene, description.camera
+    return load_scene(path, scale=scale), None
+
+
 def _write_outputs(
-    prepared: Prepared, result: SolveResult, output_dir: Path, stem: str, settings: RenderSettings
-) -> dict[str, Path]:
+    prepared: Prepared,
+    result: SolveResult,
+    output_dir: Path,
+    stem: str,
+    settings: RenderSettings,
+    camera: Camera | None = None,
+) -> tuple[dict[str, Path], dict[str, Any]]:
+    """Write every asked-for output; return their paths and facts for the report."""
     mesh = prepared.mesh
     emitting = np.asarray((mesh.receiver_emitted_exitance > 0).any(axis=1))
+    exposure = auto_exposure(result.radiosity, emitting) * 2.0**settings.exposure
     colors = display_colors(result.radiosity, emitting, settings.exposure)
-    ply = output_dir / f"{stem}.ply"
+    outputs = {"ply": output_dir / f"{stem}.ply"}
+    facts: dict[str, Any] = {"exposure": exposure}
     write_radiosity_ply(
-        ply, mesh.receiver_position, mesh.triangle_receivers, result.radiosity, colors
+        outputs["ply"], mesh.receiver_position, mesh.triangle_receivers, result.radiosity, colors
     )
-    return {"ply": ply}
+    metadata = {"scene": str(prepared.scene.source or stem), "method": result.method}
+    lightmap = None
+    if settings.lightmap is not None:
+        lightmap = bake_lightmap(mesh, result.radiosity, settings.lightmap)
+        outputs["lightmap"] = output_dir / f"{stem}.lightmap.exr"
+        outputs["lightmap_preview"] = output_dir / f"{stem}.lightmap.png"
+        write_lightmap(outputs["lightmap"], lightmap, metadata)
+        write_lightmap_preview(outputs["lightmap_preview"], lightmap, exposure)
+        facts["lightmap"] = {"size": list(lightmap.size), **lightmap.stats}
+    if settings.image is not None:
+        image = settings.image
+        view = image.camera or camera or framing_camera(mesh.positions)
+        radiance = render_radiance(
+            mesh, result.radiosity, view, image.width, image.height, image.samples
+        )
+        outputs["image"] = output_dir / f"{stem}.exr"
+        outputs["image_preview"] = output_dir / f"{stem}.png"
+        write_exr(
+            outputs["image"],
+            radiance,
+            half=False,
+            metadata={
+                "raytrad:units": "W sr-1 m-2",
+                "raytrad:quantity": "radiance",
+                **{f"raytrad:{k}": v for k, v in metadata.items()},
+            },
+        )
+        write_png(outputs["image_preview"], display_encode(radiance * exposure))
+        facts["camera"] = dataclasses.asdict(view)
+    if settings.gltf:
+        outputs["gltf"] = output_dir / f"{stem}.glb"
+        _write_gltf(outputs["gltf"], mesh, result.radiosity, exposure, lightmap)
+    return outputs, facts
+
+
+def _write_gltf(
+    path: Path,
+    mesh: RadiosityMesh,
+    radiosity: np.ndarray,
+    exposure: float,
+    lightmap: Lightmap | None,
+) -> None:
+    radiance = radiosity / np.pi
+    if lightmap is None:
+        receiver = np.arange(mesh.receiver_count)
+        triangles, uv, png = mesh.triangle_receivers, None, None
+    else:
+        receiver, triangles, uv = lightmap_vertices(mesh, lightmap)
+        png = encode_png(lightmap_preview(lightmap, exposure))
+    write_baked_glb(
+        path,
+        mesh.receiver_position[receiver],
+        mesh.receiver_normal[receiver],
+        triangles,
+        radiance[receiver] * exposure,
+        exposure,
+        uv,
+        png,
+        {"version": __version__, "colour": "linear Rec.709: radiance [W sr-1 m-2] x exposure"},
+    )
 
 
 def build_report(
@@ -353,6 +477,11 @@ def build_report(
             "scale": settings.scale,
             "exposure": settings.exposure,
             "cache_mb": settings.cache_mb,
+            "lightmap": None
+            if settings.lightmap is None
+            else dataclasses.asdict(settings.lightmap),
+            "image": None if settings.image is None else dataclasses.asdict(settings.image),
+            "gltf": settings.gltf,
         },
         "statistics": {
             "scene_triangles": prepared.scene.triangle_count,

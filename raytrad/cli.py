@@ -15,7 +15,7 @@ from typing import Any
 
 from raytrad import __version__
 from raytrad.convergence import eta_seconds
-from raytrad.errors import RaytradError
+from raytrad.errors import RaytradError, SettingsError
 from raytrad.mesh import MeshSettings
 from raytrad.solver import SHOOTING_METHODS, SolverState, SolveSettings
 
@@ -58,6 +58,68 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="EV",
         help="brighten the PLY display colours by EV stops on top of the automatic exposure "
         "(default: %(default)s)",
+    )
+    outputs = render.add_argument_group(
+        "lightmaps, images and glTF (a TOML scene's [output] and [camera] give defaults)"
+    )
+    outputs.add_argument(
+        "--lightmap",
+        action="store_true",
+        help="bake DIR/<name>.lightmap.exr (radiosity [W m-2], half float) "
+        "with a generated UV atlas, and a preview PNG",
+    )
+    outputs.add_argument(
+        "--lightmap-resolution",
+        type=int,
+        default=None,
+        metavar="TEXELS",
+        help="atlas size in texels (default: 1024)",
+    )
+    outputs.add_argument(
+        "--texel-density",
+        type=float,
+        default=None,
+        metavar="PER_METRE",
+        help="texels per metre instead of a fixed atlas size",
+    )
+    outputs.add_argument(
+        "--lightmap-padding",
+        type=int,
+        default=4,
+        metavar="TEXELS",
+        help="padding between charts (default: %(default)s)",
+    )
+    outputs.add_argument(
+        "--lightmap-float",
+        action="store_true",
+        help="write the lightmap as 32-bit float instead of half",
+    )
+    outputs.add_argument(
+        "--image",
+        action="store_true",
+        help="render DIR/<name>.exr (linear radiance [W sr-1 m-2]) and "
+        "DIR/<name>.png (exposed, sRGB) from a camera",
+    )
+    outputs.add_argument("--width", type=int, default=None, help="image width (default: 640)")
+    outputs.add_argument("--height", type=int, default=None, help="image height (default: 480)")
+    outputs.add_argument(
+        "--spp",
+        type=int,
+        default=4,
+        help="samples per pixel for anti-aliasing (default: %(default)s)",
+    )
+    outputs.add_argument(
+        "--camera",
+        default=None,
+        metavar="X,Y,Z:TX,TY,TZ[:FOV]",
+        help="camera position and look-at point [m] and vertical field of "
+        "view [degrees]; default: the scene file's, else an automatic framing",
+    )
+    outputs.add_argument(
+        "--gltf",
+        action="store_true",
+        help="write the baked model DIR/<name>.glb (vertex colours COLOR_0; "
+        "with --lightmap also TEXCOORD_1 and the lightmap image)",
     )
     render.add_argument(
         "--reference",
@@ -268,9 +330,59 @@ class _StopFlag:
         print("\nraytrad: stopping after this shot (Ctrl-C again to abort)", file=sys.stderr)
 
 
+def _parse_camera(text: str) -> Any:
+    from raytrad.camera import Camera
+
+    try:
+        parts = text.split(":")
+        position = tuple(float(v) for v in parts[0].split(","))
+        target = tuple(float(v) for v in parts[1].split(","))
+        fov = float(parts[2]) if len(parts) > 2 else 39.3
+        if len(position) != 3 or len(target) != 3 or len(parts) > 3:
+            raise ValueError
+    except (ValueError, IndexError):
+        raise SettingsError(
+            f"--camera wants X,Y,Z:TX,TY,TZ[:FOV] (metres, degrees), got {text!r}"
+        ) from None
+    return Camera(position, target, vertical_fov_deg=fov)
+
+
+def _output_settings(args: argparse.Namespace) -> dict[str, Any]:
+    """Lightmap, image and glTF settings from the options, over a TOML file's [output]."""
+    from raytrad.api import ImageSettings
+    from raytrad.lightmap import LightmapSettings
+
+    file_output: dict[str, Any] = {}
+    if args.scene.suffix.lower() == ".toml" and args.scene.is_file():
+        from raytrad.io.toml_scene import load_scene_description
+
+        file_output = load_scene_description(args.scene, scale=args.scale).output
+    out: dict[str, Any] = {"gltf": args.gltf}
+    if "exposure" in file_output and args.exposure == 0.0:
+        out["exposure"] = float(file_output["exposure"])
+    if args.lightmap or (args.gltf and args.texel_density is not None):
+        density = args.texel_density or file_output.get("texel_density")
+        resolution = args.lightmap_resolution or file_output.get("lightmap_resolution", 1024)
+        out["lightmap"] = LightmapSettings(
+            resolution=int(resolution),
+            texel_density=None if density is None else float(density),
+            padding=args.lightmap_padding,
+            half=not args.lightmap_float,
+        )
+    if args.image:
+        out["image"] = ImageSettings(
+            width=args.width or int(file_output.get("image_width", 640)),
+            height=args.height or int(file_output.get("image_height", 480)),
+            samples=args.spp,
+            camera=None if args.camera is None else _parse_camera(args.camera),
+        )
+    return out
+
+
 def _settings(args: argparse.Namespace, method: str) -> Any:
     from raytrad import api
 
+    extra = _output_settings(args) if args.command == "render" else {}
     return api.RenderSettings(
         mesh=MeshSettings(
             max_edge=args.max_edge,
@@ -289,8 +401,9 @@ def _settings(args: argparse.Namespace, method: str) -> Any:
             omega=args.omega,
         ),
         scale=args.scale,
-        exposure=getattr(args, "exposure", 0.0),
+        exposure=extra.pop("exposure", getattr(args, "exposure", 0.0)),
         cache_mb=args.cache_mb,
+        **extra,
     )
 
 

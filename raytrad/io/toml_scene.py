@@ -85,7 +85,7 @@ OUTPUT_KEYS: dict[str, OutputKey] = {
         float, -math.inf, math.inf, False, "extra exposure of display colours [EV]"
     ),
     "lightmap_resolution": OutputKey(
-        int, 1, 16384, False, "texels along each side of the lightmap atlas [1]"
+        int, 8, 16384, False, "texels along each side of the lightmap atlas [1]"
     ),
     "texel_density": OutputKey(float, 0.0, math.inf, True, "lightmap texels per metre [m-1]"),
     "image_width": OutputKey(int, 1, 16384, False, "camera image width [px]"),

@@ -145,9 +145,7 @@ def grid_wall(
             name = cell_material.get((i, j), material)
             if name is None:
                 continue
-            corners = rectangle(
-                axis, level, (u_cuts[i], v_cuts[j]), (u_cuts[i + 1], v_cuts[j + 1])
-            )
+            corners = rectangle(axis, level, (u_cuts[i], v_cuts[j]), (u_cuts[i + 1], v_cuts[j + 1]))
             builder.quad(corners, name, facing)
 
 

@@ -1,0 +1,56 @@
+"""Group 1: closed boxes of reflectance 0.9, 0.99 and 0.999.
+
+Independent expectations: the white furnace B = E / (1 - rho) at every receiver, and for any
+closed scene of uniform reflectance the exact power balance
+sum_j a_j B_j = sum_j a_j E_j / (1 - rho) (REFERENCE.md section 3). A non-convex closed
+scene (a box holding a block) checks that occlusion does not lose energy.
+"""
+
+from __future__ import annotations
+
+import pytest
+
+from .cases import HIGH_RHO, OPEN_RHO, assert_finished, assert_within, case, run_case
+
+
+@pytest.mark.parametrize("rho", HIGH_RHO)
+def test_white_furnace(rho: float) -> None:
+    # B = E / (1 - rho) everywhere: 10, 100 and 1000 for E = 1.
+    run = run_case(case(f"furnace-{rho}"))
+    assert_finished(run)
+    assert_within(run)
+
+
+@pytest.mark.parametrize("rho", HIGH_RHO)
+def test_power_balance_with_one_emitting_face(rho: float) -> None:
+    # The ceiling (1 m2, E = 1) alone emits: sum a B = 1 / (1 - rho) W.
+    run = run_case(case(f"one-lamp-{rho}"))
+    assert_finished(run)
+    assert_within(run)
+    # nothing can leave a closed box
+    state, emitted = run.result.state, run.result.emitted_power
+    assert (state.escaped <= 1e-3 * emitted).all()
+
+
+def test_power_balance_with_a_floating_block() -> None:
+    # Non-convex: the block shadows, the rows are balanced by ray casting, not geometry.
+    run = run_case(case(f"block-floating-{OPEN_RHO}"))
+    assert_finished(run)
+    assert_within(run)
+
+
+@pytest.mark.xfail(
+    strict=True,
+    reason=(
+        "Closed cube (rho = 0.99, ceiling E = 1) with a 0.3 x 0.5 x 0.4 m block standing on "
+        "the floor (no bottom face): sum a B = 64.8 W instead of 100 W (-35%; -4.2% at "
+        "rho = 0.9) and the ledger reports 36% of the power 'escaped' from a closed scene. "
+        "Floor triangles that straddle the block's footprint are kept whole, so 20 floor "
+        "receivers under the block (e.g. (0.5625, 0, 0.5625)) get all-zero form-factor rows "
+        "and the floor patches that contain them capture only 87-96% of what they shoot."
+    ),
+)
+def test_power_balance_with_a_block_standing_on_the_floor() -> None:
+    run = run_case(case(f"block-standing-{OPEN_RHO}"))
+    assert_finished(run)
+    assert_within(run)
