@@ -26,7 +26,7 @@ from raytrad.checkpoint import fingerprint, load_checkpoint, save_checkpoint
 from raytrad.convergence import ConvergenceMonitor, ErrorLog, Reference
 from raytrad.display import auto_exposure, display_colors
 from raytrad.errors import RaytradError, SettingsError
-from raytrad.formfactor import FormFactorEngine
+from raytrad.formfactor import RAY_OFFSET, FormFactorEngine, receiver_points
 from raytrad.image import framing_camera, render_radiance
 from raytrad.io.atomic import atomic_write
 from raytrad.io.exr import display_encode, encode_png, write_exr, write_png
@@ -42,7 +42,7 @@ from raytrad.lightmap import (
     write_lightmap,
     write_lightmap_preview,
 )
-from raytrad.mesh import MeshSettings, RadiosityMesh, build_mesh
+from raytrad.mesh import MeshSettings, RadiosityMesh, build_mesh, hide_receivers
 from raytrad.plot import plot_convergence
 from raytrad.reference import analytic_furnace, dense_solve, reference_from_ply
 from raytrad.repair import repair_scene
@@ -237,14 +237,16 @@ def prepare(scene: Scene, settings: RenderSettings | None = None) -> Prepared:
 
         mesh = build_mesh(scene, settings.mesh, enclosed)
     check_solvable(mesh)  # before any form factor is computed
-    engine = FormFactorEngine(mesh, occluder, cache_bytes=int(settings.cache_mb * (1 << 20)))
     closed = None
     with _timed(timings, "form_factors"):
         if occluder is not None:
             _, normals = triangle_areas_normals(scene.triangle_vertices())
-            closed = occluder.sees_only_front_faces(
-                engine.evaluation_points, mesh.receiver_normal, normals, scene.double_sided
+            points, _ = receiver_points(mesh, RAY_OFFSET * occluder.diagonal)
+            closed, hidden = occluder.probe_hemispheres(
+                points, mesh.receiver_normal, normals, scene.double_sided
             )
+            mesh = hide_receivers(mesh, hidden)
+        engine = FormFactorEngine(mesh, occluder, cache_bytes=int(settings.cache_mb * (1 << 20)))
         balance = engine.balance(closed)
     log.info(
         "form factors: %d closed rows held to 1 (largest miss %.2e), %d patches held to "

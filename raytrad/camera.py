@@ -36,8 +36,9 @@ class Camera:
         if np.linalg.norm(np.cross(forward, self.up)) == 0:
             raise SettingsError("camera up must not be parallel to the view direction")
         if not 0 < self.vertical_fov_deg < 180:
-            raise SettingsError(f"vertical field of view must be in (0, 180), got "
-                                f"{self.vertical_fov_deg}")
+            raise SettingsError(
+                f"vertical field of view must be in (0, 180), got {self.vertical_fov_deg}"
+            )
 
     def basis(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(right, up, forward) orthonormal vectors of the camera frame."""
@@ -46,5 +47,3 @@ class Camera:
         right = np.cross(forward, self.up)
         right /= np.linalg.norm(right)
         return right, np.cross(right, forward), forward
-
-

@@ -248,7 +248,7 @@ class FormFactorEngine:
         self._col_scale = np.ones(mesh.patch_count)
         diag = float(np.linalg.norm(np.ptp(mesh.positions, axis=0)))
         self.diagonal = diag
-        self._points, self._origins = _receiver_points(mesh, RAY_OFFSET * diag)
+        self._points, self._origins = receiver_points(mesh, RAY_OFFSET * diag)
         order = np.lexsort((np.arange(len(mesh.triangle_subarea)), mesh.triangle_subarea))
         self._sub_tri = order
         self._sub_ptr = np.searchsorted(
@@ -271,7 +271,7 @@ class FormFactorEngine:
     @property
     def evaluation_points(self) -> np.ndarray:
         """(R, 3) float64 where each receiver's factors are evaluated [m] (see
-        :func:`_receiver_points`)."""
+        :func:`receiver_points`)."""
         return self._points
 
     def column(self, patch: int) -> Column:
@@ -583,7 +583,7 @@ class FormFactorEngine:
         return self.occluder.occluded_local(self.occluder.to_local(origins), direction, reach)
 
 
-def _receiver_points(mesh: RadiosityMesh, offset: float) -> tuple[np.ndarray, np.ndarray]:
+def receiver_points(mesh: RadiosityMesh, offset: float) -> tuple[np.ndarray, np.ndarray]:
     """Where each receiver's factors are evaluated, and where its rays start.
 
     A receiver on an edge where two surfaces meet (a room corner, a block on the floor)

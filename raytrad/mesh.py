@@ -16,7 +16,7 @@ from __future__ import annotations
 import logging
 import math
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -38,7 +38,7 @@ class RadiosityMesh:
     receiver_position : (R, 3) float64 [m]
     receiver_normal : (R, 3) float64, unit
     receiver_area : (R,) float64 [m2], a third of the area of each adjacent triangle
-    receiver_inward : (R, 3) float64 [m], the mean centroid of the receiver's own triangles
+    receiver_inward : (R, 3) float64 [m], the centroid of the receiver's largest own triangle
         (a point strictly inside its surface, used to start rays off adjacent planes)
     receiver_reflectance : (R, 3) float64 [1]
     receiver_emitted_exitance : (R, 3) float64 [W m-2]
@@ -61,6 +61,8 @@ class RadiosityMesh:
     subarea_size : (S,) float64 [m], bounding-box diagonal of the sub-area
     positions : (V, 3) float64 [m], vertex positions of the refined mesh
     triangles : (T, 3) int64, vertex indices of the refined mesh
+    receiver_visible : (R,) bool or None, False for receivers shut in by other surfaces
+        (see :func:`hide_receivers`); None means all visible
     """
 
     receiver_position: np.ndarray
@@ -88,6 +90,7 @@ class RadiosityMesh:
     subarea_size: np.ndarray
     positions: np.ndarray
     triangles: np.ndarray
+    receiver_visible: np.ndarray | None = None
 
     @property
     def receiver_count(self) -> int:
@@ -176,7 +179,7 @@ def refine(
         marked = length > edge_limit
         if not marked.any():
             break
-        longest = np.argmax(length[tri_edges], axis=1)
+        longest = _longest_edge(length[tri_edges])
         longest_edge = tri_edges[np.arange(len(triangles)), longest]
         while True:  # longest-edge closure
             needs = marked[tri_edges].any(axis=1) & ~marked[longest_edge]
@@ -192,6 +195,17 @@ def refine(
     else:
         log.warning("refinement stopped after %d rounds", max_rounds)
     return positions, triangles, parent
+
+
+def _longest_edge(lengths: np.ndarray) -> np.ndarray:
+    """(T,) index of each row's largest entry, ties (to 1e-9 relative) to the first.
+
+    Rounding must not decide: the two legs of an isosceles triangle are equal up to the
+    last bit, and which one wins would change with the model's units or position, and the
+    whole refinement with it.
+    """
+    relative = lengths / np.maximum(lengths.max(axis=1, keepdims=True), 1e-300)
+    return np.argmax(np.round(relative * 1e9), axis=1)
 
 
 def _split_triangles(
@@ -334,10 +348,15 @@ def bisect_clusters(
         want = split(labels, extent) & (extent.max(axis=1) > 0)
         if not want.any():
             break
-        axis = np.argmax(extent, axis=1)
+        axis = _longest_edge(extent)  # ties between axes broken the same way
         middle = 0.5 * (lo + hi)[np.arange(count), axis]
         item_axis = axis[labels]
-        upper = want[labels] & (centroids[np.arange(len(labels)), item_axis] > middle[labels])
+        # a centroid within 1e-9 of the cluster size of the middle counts as below it, so
+        # the split does not depend on rounding (units, far-from-origin placement)
+        margin = 1e-9 * extent.max(axis=1)
+        upper = want[labels] & (
+            centroids[np.arange(len(labels)), item_axis] > middle[labels] + margin[labels]
+        )
         new_label = count + np.cumsum(want) - 1
         labels = np.where(upper, new_label[labels], labels)
         labels = np.unique(labels, return_inverse=True)[1].reshape(-1)
@@ -549,13 +568,19 @@ def _receivers(
     third = np.repeat(area / 3.0, 3)
     r_area = np.bincount(inverse, weights=third, minlength=count)
     r_normal = np.zeros((count, 3))
-    r_inward = np.zeros((count, 3))
     centroid = np.repeat(positions[triangles].mean(axis=1), 3, axis=0)
     tri_normal = np.repeat(normal, 3, axis=0)
     for k in range(3):
         r_normal[:, k] = np.bincount(inverse, weights=tri_normal[:, k] * third, minlength=count)
-        r_inward[:, k] = np.bincount(inverse, weights=centroid[:, k] * third, minlength=count)
-    r_inward /= r_area[:, None]
+    # The inward point is the centroid of the receiver's largest own triangle, not a mean:
+    # where a fin meets a wall, the mean of the triangles on both sides of the fin lies in
+    # the fin's plane, and a receiver evaluated there would see half a hemisphere.
+    largest = np.zeros(count)
+    np.maximum.at(largest, inverse, third)
+    relative = np.round(third / np.maximum(largest[inverse], 1e-300) * 1e9)  # ties: see
+    order = np.lexsort((-relative, inverse))  # _longest_edge
+    first = order[np.searchsorted(inverse[order], np.arange(count))]
+    r_inward = centroid[first]
     r_normal /= np.linalg.norm(r_normal, axis=1)[:, None]
     return inverse.reshape(-1, 3), positions[uniq[:, 0]], r_normal, r_area, r_inward
 
@@ -638,9 +663,15 @@ def _assemble(
     s_area = np.bincount(subarea, weights=area, minlength=s_count)
     lo, hi = _cluster_bounds(corners.reshape(-1, 3), np.repeat(subarea, 3), s_count)
     s_size = np.linalg.norm(hi - lo, axis=1)
-    rng = np.random.default_rng(seed)
-    chosen = _pick_triangles(subarea, area, s_count, rng)
-    u, v = rng.random(s_count), rng.random(s_count)
+    # Sample points hang on the geometry, not on the order of the file's triangles: each
+    # triangle gets a canonical key from its quantised centroid, and each sub-area its
+    # random numbers from a hash of its smallest key and the seed.
+    key = _position_keys(centroid, positions)
+    sub_key = np.full(s_count, np.iinfo(np.int64).max)
+    np.minimum.at(sub_key, subarea, key)
+    random = _hash_uniform(sub_key, seed, 3)
+    chosen = _pick_triangles(subarea, area, s_count, random[:, 0], key)
+    u, v = random[:, 1], random[:, 2]
     flip = u + v > 1.0
     u, v = np.where(flip, 1.0 - u, u), np.where(flip, 1.0 - v, v)
     c = corners[chosen]
@@ -676,15 +707,72 @@ def _assemble(
 
 
 def _pick_triangles(
-    subarea: np.ndarray, area: np.ndarray, count: int, rng: np.random.Generator
+    subarea: np.ndarray, area: np.ndarray, count: int, uniform: np.ndarray, key: np.ndarray
 ) -> np.ndarray:
-    """One triangle per sub-area, chosen with probability proportional to its area."""
-    order = np.lexsort((np.arange(len(subarea)), subarea))
+    """One triangle per sub-area, chosen with probability proportional to its area.
+
+    ``uniform`` (count,) in [0, 1) picks along the sub-area's triangles in ``key`` order.
+    """
+    order = np.lexsort((key, subarea))
     cum = np.cumsum(area[order])
     start = np.searchsorted(subarea[order], np.arange(count))
     end = np.append(start[1:], len(order))
     before = np.where(start > 0, cum[np.maximum(start - 1, 0)], 0.0)
-    target = before + rng.random(count) * (cum[end - 1] - before)
+    target = before + uniform * (cum[end - 1] - before)
     pick = np.searchsorted(cum, target, side="right")
     pick = np.clip(pick, start, end - 1)
     return order[pick]
+
+
+def _position_keys(points: np.ndarray, positions: np.ndarray) -> np.ndarray:
+    """(N,) int64 key of each point, quantised to 2^-20 of the scene's extent (so the
+    same in any units and at any placement)."""
+    lo = positions.min(axis=0)
+    extent = max(float(np.ptp(positions, axis=0).max()), 1e-300)
+    q = np.round((points - lo) / extent * (1 << 20)).astype(np.int64)
+    return (q[:, 0] << 42) ^ (q[:, 1] << 21) ^ q[:, 2]
+
+
+def _hash_uniform(keys: np.ndarray, seed: int, count: int) -> np.ndarray:
+    """(N, count) uniform numbers in [0, 1) from integer keys (splitmix64 mixing)."""
+    out = np.empty((len(keys), count))
+    state = keys.astype(np.uint64) ^ np.uint64((seed * 0x9E3779B97F4A7C15) & (2**64 - 1))
+    with np.errstate(over="ignore"):
+        for k in range(count):
+            state = state + np.uint64(0x9E3779B97F4A7C15)
+            z = state
+            z = (z ^ (z >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
+            z = (z ^ (z >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
+            z = z ^ (z >> np.uint64(31))
+            out[:, k] = (z >> np.uint64(11)).astype(np.float64) / float(1 << 53)
+    return out
+
+
+def hide_receivers(mesh: RadiosityMesh, hidden: np.ndarray) -> RadiosityMesh:
+    """The mesh with receivers that can neither see nor be seen taken out of the surface.
+
+    A receiver under a block standing on the floor sees only the block's inside. Its
+    radiosity stays as computed (its emission), but it no longer counts in its patch's
+    mean radiosity, its area is zero and its patch's area shrinks by its share, so a patch
+    half under the block shoots its visible half's radiosity from its visible area, and a
+    closed room loses no energy through the block's footprint.
+
+    Parameters
+    ----------
+    mesh : RadiosityMesh
+    hidden : (R,) bool
+    """
+    if not hidden.any():
+        return mesh
+    visible = ~np.asarray(hidden, dtype=bool)
+    corner_share = np.repeat(mesh.triangle_area / 3.0, 3) * visible[mesh.triangle_receivers].ravel()
+    patch_area = np.bincount(
+        np.repeat(mesh.triangle_patch, 3), weights=corner_share, minlength=mesh.patch_count
+    )
+    floor = 1e-12 * float(mesh.patch_area.sum())
+    return replace(
+        mesh,
+        receiver_area=mesh.receiver_area * visible,
+        patch_area=np.maximum(patch_area, floor),
+        receiver_visible=visible,
+    )

@@ -1,8 +1,11 @@
 """Fixing what CAD export and hand modelling get wrong, with a warning for each fix.
 
-* **Duplicate faces**: the same triangle twice (coincident coplanar faces) would receive and
-  shoot twice, doubling the light it sends. One copy is kept. A copy with the opposite
-  winding is the other side of a two-sided surface and stays.
+* **T-junctions**: a vertex lying inside another triangle's edge splits that triangle, so
+  surfaces conform (no light or shadow leaks along the seam, and winding can be compared).
+* **Duplicate faces**: the same triangle twice, or a coplanar face lying on an earlier one
+  facing the same way (the same quad triangulated twice), would receive and shoot twice,
+  doubling the light it sends. One copy is kept. A copy with the opposite winding is the
+  other side of a two-sided surface and stays.
 * **Inverted faces**: in a connected, edge-sharing surface (a closed room, a block), every
   shared edge is walked in opposite directions by its two faces. Faces whose winding
   disagrees with the larger part (by area) of their surface were modelled inside out: a room
@@ -26,9 +29,10 @@ def repair_scene(scene: Scene) -> Scene:
     """The scene without duplicate faces and with consistent winding (see module doc)."""
     used = np.unique(scene.triangles)
     extent = float(np.ptp(scene.positions[used], axis=0).max())
-    _, merged = merge_vertices(scene.positions, scene.triangles, extent * 1e-9)
     where = scene.source or "<scene>"
-    keep = _first_of_duplicates(merged)
+    scene = _split_t_junctions(scene, extent, where)
+    _, merged = merge_vertices(scene.positions, scene.triangles, extent * 1e-9)
+    keep = _first_of_duplicates(merged) & ~_covered_by_earlier(scene, extent)
     if not keep.all():
         log.warning(
             "%s: dropped %d duplicate faces (the same triangle twice would double its light)",
@@ -141,3 +145,142 @@ def _parity_components(
             parity[nxt] = p[first]
             frontier = nxt
     return label, parity
+
+
+#: Largest vertex x edge (and coplanar-group) work done to find T-junctions and overlaps.
+_REPAIR_WORK_LIMIT = 50_000_000
+
+
+def _split_t_junctions(scene: Scene, extent: float, where: object) -> Scene:
+    """Split triangles whose edges pass through another vertex (to 1e-7 of the extent)."""
+    positions, triangles = merge_vertices(scene.positions, scene.triangles, extent * 1e-9)
+    material = scene.material_index
+    total = 0
+    for _ in range(32):
+        edges, tri_edges = _edges(triangles)
+        if len(positions) * len(edges) > _REPAIR_WORK_LIMIT:
+            log.info("%s: too large to look for T-junctions", where)
+            break
+        split_vertex = _vertex_inside_edges(positions, edges, 1e-7 * extent)
+        split_vertex = _same_surface_only(positions, triangles, edges, tri_edges, split_vertex)
+        if not (split_vertex >= 0).any():
+            break
+        # split each triangle at the first of its edges that has a vertex inside
+        has = split_vertex[tri_edges] >= 0
+        which = np.argmax(has, axis=1)
+        todo = np.nonzero(has.any(axis=1))[0]
+        k = which[todo]
+        t = triangles[todo]
+        a, b, c = (
+            t[np.arange(len(t)), k],
+            t[np.arange(len(t)), (k + 1) % 3],
+            t[np.arange(len(t)), (k + 2) % 3],
+        )
+        v = split_vertex[tri_edges[todo, k]]
+        keep = np.ones(len(triangles), dtype=bool)
+        keep[todo] = False
+        triangles = np.concatenate(
+            [triangles[keep], np.stack([a, v, c], 1), np.stack([v, b, c], 1)]
+        )
+        material = np.concatenate([material[keep], material[todo], material[todo]])
+        total += len(todo)
+    if total == 0:
+        return scene
+    log.warning(
+        "%s: split %d faces at T-junctions (vertices inside other faces' edges)", where, total
+    )
+    return replace(scene, positions=positions, triangles=triangles, material_index=material)
+
+
+def _same_surface_only(
+    positions: np.ndarray,
+    triangles: np.ndarray,
+    edges: np.ndarray,
+    tri_edges: np.ndarray,
+    split_vertex: np.ndarray,
+) -> np.ndarray:
+    """Keep a T-vertex only if a face using it lies in the plane of a face using the edge.
+
+    A block's corner touching the floor's diagonal is not a T-junction of the floor.
+    """
+    _, normal = triangle_areas_normals(positions[triangles])
+    edge_faces = np.repeat(np.arange(len(triangles)), 3)
+    out = split_vertex.copy()
+    for e in np.nonzero(split_vertex >= 0)[0]:
+        faces = edge_faces[tri_edges.reshape(-1) == e]
+        users = np.nonzero((triangles == split_vertex[e]).any(axis=1))[0]
+        # v lies on the edge, so a user face parallel to an edge face shares its plane
+        if not (np.abs(normal[faces] @ normal[users].T) > 1.0 - 1e-9).any():
+            out[e] = -1
+    return out
+
+
+def _edges(triangles: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    directed = np.stack([triangles, np.roll(triangles, -1, axis=1)], axis=2).reshape(-1, 2)
+    edges, inverse = np.unique(np.sort(directed, axis=1), axis=0, return_inverse=True)
+    return edges, inverse.reshape(-1, 3)
+
+
+def _vertex_inside_edges(positions: np.ndarray, edges: np.ndarray, tolerance: float) -> np.ndarray:
+    """(E,) index of a vertex strictly inside each edge (closest to its middle), else -1."""
+    used = np.unique(edges)
+    points = positions[used]
+    out = np.full(len(edges), -1, dtype=np.int64)
+    chunk = max(1, 2_000_000 // max(len(points), 1))
+    for start in range(0, len(edges), chunk):
+        e = edges[start : start + chunk]
+        a, b = positions[e[:, 0]], positions[e[:, 1]]
+        d = b - a
+        length2 = np.einsum("ij,ij->i", d, d)
+        t = np.einsum("pj,ej->ep", points, d) - np.einsum("ej,ej->e", a, d)[:, None]
+        t = t / np.maximum(length2, 1e-300)[:, None]
+        closest = a[:, None, :] + t[..., None] * d[:, None, :]
+        distance = np.linalg.norm(points[None, :, :] - closest, axis=2)
+        length = np.sqrt(length2)[:, None]
+        inside = (distance < tolerance) & (t * length > tolerance) & ((1 - t) * length > tolerance)
+        score = np.where(inside, np.abs(t - 0.5), np.inf)
+        best = np.argmin(score, axis=1)
+        found = np.isfinite(score[np.arange(len(e)), best])
+        out[start : start + chunk] = np.where(found, used[best], -1)
+    return out
+
+
+def _covered_by_earlier(scene: Scene, extent: float) -> np.ndarray:
+    """(T,) bool: faces whose centroid lies on an earlier coplanar face facing the same way."""
+    corners = scene.triangle_vertices()
+    _, normal = triangle_areas_normals(corners)
+    offset = np.einsum("ij,ij->i", normal, corners[:, 0])
+    key = np.column_stack(
+        [np.round(normal * 1e6), np.round(offset / max(extent, 1e-300) * 1e7)]
+    ).astype(np.int64)
+    _, group = np.unique(key, axis=0, return_inverse=True)
+    group = group.reshape(-1)
+    covered = np.zeros(len(corners), dtype=bool)
+    counts = np.bincount(group)
+    for g in np.nonzero(counts > 1)[0]:
+        members = np.nonzero(group == g)[0]
+        if len(members) ** 2 > _REPAIR_WORK_LIMIT:
+            continue
+        centroid = corners[members].mean(axis=1)
+        inside = _points_in_triangles(centroid, corners[members], normal[members[0]])
+        earlier = np.tril(inside, k=-1)  # point i inside an earlier triangle j < i
+        covered[members[earlier.any(axis=1)]] = True
+    return covered
+
+
+def _points_in_triangles(
+    points: np.ndarray, triangles: np.ndarray, normal: np.ndarray
+) -> np.ndarray:
+    """(N, M) bool: point i inside or on triangle j (all coplanar, unit normal given).
+
+    On the boundary counts: the centroid of one diagonal's half of a quad lies on the
+    other diagonal, the shared edge of the earlier copy's two halves.
+    """
+    inside = np.ones((len(points), len(triangles)), dtype=bool)
+    for k in range(3):
+        a, b = triangles[:, k], triangles[:, (k + 1) % 3]
+        edge = np.cross(b - a, normal)  # points outward for counter-clockwise triangles
+        side = np.einsum("pj,tj->pt", points, edge) - np.einsum("tj,tj->t", a, edge)[None, :]
+        scale = np.linalg.norm(edge, axis=1)[None, :]
+        inside &= side <= 1e-9 * scale * np.linalg.norm(b - a, axis=1)[None, :]
+    return inside

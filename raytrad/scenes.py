@@ -315,8 +315,6 @@ def write_obj(scene: Scene, obj_path: str | os.PathLike[str]) -> None:
         f.write("\n".join(obj) + "\n")
 
 
-
-
 def _gltf_material(scene: Scene, i: int, name: str) -> dict[str, object]:
     """glTF material ``i``: baseColorFactor = reflectance, emission as radiance E / pi.
 
@@ -392,5 +390,3 @@ def write_glb(scene: Scene, glb_path: str | os.PathLike[str]) -> None:
         header["extensionsUsed"] = ["KHR_materials_emissive_strength"]
     with atomic_write(glb_path, "wb") as f:
         f.write(glb_container(json.dumps(header).encode("utf-8"), binary))
-
-

@@ -224,6 +224,8 @@ class _Problem:
         tri_patch = np.repeat(mesh.triangle_patch, 3)
         receiver = mesh.triangle_receivers.reshape(-1)
         weight = np.repeat(mesh.triangle_area / 3.0, 3) / mesh.patch_area[tri_patch]
+        if mesh.receiver_visible is not None:  # hidden receivers do not count
+            weight = weight * mesh.receiver_visible[receiver]
         # merge duplicate (receiver, patch) entries
         key = receiver * mesh.patch_count + tri_patch
         uniq, inverse = np.unique(key, return_inverse=True)
@@ -352,6 +354,7 @@ def solve(
         state.rays = rays_before + engine.rays_cast
         state.seconds = time.perf_counter() - start
         _guard_growth(state, area, settings)
+        _check_divergence(state, area, emitted_total)
         if progress is not None:
             progress(state, residual)
     state.seconds = time.perf_counter() - start
@@ -400,6 +403,26 @@ def _shoot(
     state.escaped += area_p * amount - caught
     state.captured[patch] = float(a @ f) / area_p
     state.shots += 1
+
+
+#: Unshot power beyond this multiple of the emitted power means divergence: overshooting
+#: legitimately leaves unshot power of order rho / (1 - rho) times the emitted power.
+DIVERGENCE_LIMIT = 1e9
+
+
+def _check_divergence(state: SolverState, area: np.ndarray, emitted_total: float) -> None:
+    """Raise when the unshot power has grown past any legitimate overshoot.
+
+    That happens only when the discrete system has no finite solution: some closed set of
+    surfaces returns more than it receives (reflectance times form-factor sum >= 1).
+    """
+    total = float((area @ np.abs(state.unshot)).sum())
+    if not np.isfinite(total) or total > DIVERGENCE_LIMIT * emitted_total:
+        raise SolverError(
+            f"the solve diverged after {state.shots} shots: the unshot power grew to "
+            f"{total / emitted_total:.3g} times the emitted power; the scene reflects more "
+            "than it receives somewhere (reflectance times form-factor sum >= 1)"
+        )
 
 
 def _guard_growth(state: SolverState, area: np.ndarray, settings: SolveSettings) -> None:

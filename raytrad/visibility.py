@@ -235,6 +235,22 @@ class Occluder:
         hits = self._hemisphere_hits(points, normals, triangle_normals, double_sided, rays)
         return (hits == _FRONT).all(axis=1)
 
+    def probe_hemispheres(
+        self,
+        points: np.ndarray,
+        normals: np.ndarray,
+        triangle_normals: np.ndarray,
+        double_sided: np.ndarray,
+        rays: int = 64,
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """(closed, enclosed), both (N,) bool, from one set of probe rays.
+
+        ``closed``: every ray hits the front of a surface (:meth:`sees_only_front_faces`);
+        ``enclosed``: every ray hits a back face (:meth:`enclosed`).
+        """
+        hits = self._hemisphere_hits(points, normals, triangle_normals, double_sided, rays)
+        return (hits == _FRONT).all(axis=1), (hits == _BACK).all(axis=1)
+
     def _hemisphere_hits(
         self,
         points: np.ndarray,

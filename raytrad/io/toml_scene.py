@@ -68,7 +68,6 @@ TEMPERATURE_RANGE_K = (1000.0, 40000.0)
 """Accepted blackbody colour temperatures [K]."""
 
 
-
 @dataclass(frozen=True)
 class OutputKey:
     """One accepted ``[output]`` key: its type, range and meaning (with unit)."""

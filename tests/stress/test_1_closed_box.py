@@ -39,17 +39,6 @@ def test_power_balance_with_a_floating_block() -> None:
     assert_within(run)
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason=(
-        "Closed cube (rho = 0.99, ceiling E = 1) with a 0.3 x 0.5 x 0.4 m block standing on "
-        "the floor (no bottom face): sum a B = 64.8 W instead of 100 W (-35%; -4.2% at "
-        "rho = 0.9) and the ledger reports 36% of the power 'escaped' from a closed scene. "
-        "Floor triangles that straddle the block's footprint are kept whole, so 20 floor "
-        "receivers under the block (e.g. (0.5625, 0, 0.5625)) get all-zero form-factor rows "
-        "and the floor patches that contain them capture only 87-96% of what they shoot."
-    ),
-)
 def test_power_balance_with_a_block_standing_on_the_floor() -> None:
     run = run_case(case(f"block-standing-{OPEN_RHO}"))
     assert_finished(run)

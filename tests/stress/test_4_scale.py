@@ -50,20 +50,6 @@ def test_surface_means_do_not_depend_on_scale_or_placement(variant: str) -> None
     assert_within(run)  # each quad's area-weighted mean B within 1% of the metre version
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason=(
-        "Per-receiver radiosity changes with scale and placement: the Cornell box at "
-        "max_edge 0.05 m x f, patch_size 0.14 m x f has the very same receiver points for "
-        "f = 1e-3, 1e3 and a 1e5 m shift, but 74-108 of 5104 lit receiver-channels differ "
-        "by more than 1% from the metre version (up to 5.4% mm, 9.2% km, 10% shifted). "
-        "refine() picks the edge to split with argmax over float edge lengths; the right "
-        "isosceles triangles of the quad splits have two equal legs up to rounding, so the "
-        "scale (even x(1+1e-12)) flips which diagonal is cut: same vertices, different "
-        "triangles, hence different receiver areas, sub-areas and sample points (moved by "
-        "up to 0.12 m)."
-    ),
-)
 @pytest.mark.parametrize("variant", VARIANTS)
 def test_receivers_do_not_depend_on_scale_or_placement(variant: str) -> None:
     run = _scale_run(variant)

@@ -45,18 +45,6 @@ def test_coincident_identical_faces_are_dropped_with_a_warning(
     assert _warned(caplog, "duplicate")
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason=(
-        "Coincident coplanar faces that are not the same triangles go unnoticed: the unit "
-        "cube's ceiling quad given twice, the copy split along the other diagonal (corners "
-        "1-3 instead of 0-2), gives no warning and is meshed as two surfaces. In the "
-        "furnace (rho 0.9, E 1) the box emits 7 W instead of 6 W and 1815 of 1959 "
-        "receivers are off by more than 1%, from -63% to +16% (B = 3.7 .. 11.6 instead of "
-        "10); with the ceiling as the lamp it emits 2 W instead of 1 W and sum a B = "
-        "19.9 W instead of 10 W. Only identical triangles are detected as duplicates."
-    ),
-)
 @pytest.mark.parametrize("kind", KINDS)
 def test_coincident_retriangulated_faces_are_merged_with_a_warning(
     kind: str, caplog: pytest.LogCaptureFixture
@@ -78,19 +66,6 @@ def test_non_manifold_edges_of_a_partition(kind: str) -> None:
     _check(f"non-manifold-partition-{kind}")
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason=(
-        "Unit cube furnace (rho 0.9, E 1) with a double-sided fin from the floor/back-wall "
-        "edge up the plane y = z to 0.3 m (quad (0,0,0) (1,0,0) (1,.3,.3) (0,.3,.3)): the "
-        "side-wall receivers on the fin's ends, e.g. (0, 0.25, 0.25) normal +x and the "
-        "corners (0,0,0) and (1,0,0), get form-factor rows summing to 0.47-0.48 (half the "
-        "hemisphere lost where the ray origin lies in the fin's plane), which the balance "
-        "leaves alone (off by more than 5%), so B there is 48-49% low; 626 receivers are "
-        "more than 1% low and sum a B is 1.2% low. With only the ceiling emitting the "
-        "power balance is 0.95% low, just inside the tolerance."
-    ),
-)
 def test_non_manifold_fin_in_a_corner_furnace() -> None:
     _check("non-manifold-fin-furnace")
 
@@ -108,19 +83,6 @@ def test_inverted_wall_is_fixed_with_a_warning(kind: str, caplog: pytest.LogCapt
     assert _warned(caplog, "flipped")
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason=(
-        "An inside-out wall that shares no whole edge with the rest of the box is only "
-        "partly fixed: the x = 1 wall as a half quad (y < 0.5) and two quarter quads, all "
-        "wound outward. The repair's edge-winding vote flips the half quad (it shares the "
-        "floor's edge) and warns 'flipped 2 faces', but the two quarter quads share no "
-        "manifold edge with anything and stay inside out: they swallow the light reaching "
-        "their back. Furnace (rho 0.9, E 1): B is 47% low on average, 90% at worst, and "
-        "52% of the emitted power escapes the closed box; with the ceiling as the lamp "
-        "sum a B is 46% low."
-    ),
-)
 @pytest.mark.parametrize("kind", KINDS)
 def test_inverted_wall_with_t_junctions_is_fixed_with_a_warning(
     kind: str, caplog: pytest.LogCaptureFixture

@@ -37,19 +37,6 @@ def test_ambient_survives_form_factors_that_sum_to_099() -> None:
     assert run.result.state.shots < 20_000
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason=(
-        "Energy-creating form factors are not reported: the convex cube at rho = 0.995 with "
-        "every factor x 1.01 (rho k = 1.005 > 1, no finite solution) runs ambient to its "
-        "shot cap and returns stop_reason 'max-shots' with radiosity 2.7e25 after 10 000 "
-        "shots (2e68 after 30 000; an overflow RuntimeWarning in the ambient term on the "
-        "way), having halved the overshoot 10 times down to 1e-3; with x 1.2 at rho = 0.9 "
-        "it overflows to NaN and only then raises 'the solve produced non-finite "
-        "radiosity'. Expected: the growth is detected during the solve "
-        "and reported as divergence."
-    ),
-)
 @pytest.mark.filterwarnings("ignore:overflow:RuntimeWarning")  # part of the bug described
 def test_energy_creating_form_factors_are_reported_as_divergence() -> None:
     prepared = api.prepare(furnace_box(0.995, 1.0), api.RenderSettings(mesh=BOX_MESH))
