@@ -218,23 +218,6 @@ class Occluder:
         hits = self._hemisphere_hits(points, normals, triangle_normals, double_sided, rays)
         return (hits == _BACK).all(axis=1)
 
-    def sees_only_front_faces(
-        self,
-        points: np.ndarray,
-        normals: np.ndarray,
-        triangle_normals: np.ndarray,
-        double_sided: np.ndarray,
-        rays: int = 64,
-    ) -> np.ndarray:
-        """(N,) bool: every ray over the hemisphere hits the front of a surface.
-
-        Such a point sees no opening to the outside and no light-swallowing back face, so
-        its form factors must sum to 1 (see ``FormFactorEngine.normalize_closed_rows``).
-        Parameters as :meth:`enclosed`.
-        """
-        hits = self._hemisphere_hits(points, normals, triangle_normals, double_sided, rays)
-        return (hits == _FRONT).all(axis=1)
-
     def probe_hemispheres(
         self,
         points: np.ndarray,
@@ -245,8 +228,10 @@ class Occluder:
     ) -> tuple[np.ndarray, np.ndarray]:
         """(closed, enclosed), both (N,) bool, from one set of probe rays.
 
-        ``closed``: every ray hits the front of a surface (:meth:`sees_only_front_faces`);
-        ``enclosed``: every ray hits a back face (:meth:`enclosed`).
+        ``closed``: every ray hits the front of a surface, so the point sees no opening and
+        no light-swallowing back face and its form factors must sum to 1
+        (``FormFactorEngine.balance``); ``enclosed``: every ray hits a back face
+        (:meth:`enclosed`). Parameters as :meth:`enclosed`.
         """
         hits = self._hemisphere_hits(points, normals, triangle_normals, double_sided, rays)
         return (hits == _FRONT).all(axis=1), (hits == _BACK).all(axis=1)

@@ -30,20 +30,30 @@ ROOT = Path(__file__).resolve().parent.parent
 
 
 class _Recorder:
-    """Wraps an Occluder to keep the rays it is asked to trace (up to a budget)."""
+    """Replaces ``Occluder.occluded_local`` (class-wide) to keep a sample of the rays traced."""
 
-    def __init__(self, occluder: Occluder, budget: int) -> None:
-        self.occluder = occluder
+    def __init__(self, budget: int) -> None:
         self.budget = budget
         self.parts: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
         self.kept = 0
-        self._inner = occluder.occluded_local
+        self.inner = Occluder.occluded_local
 
-    def __call__(self, o: np.ndarray, d: np.ndarray, t: np.ndarray) -> np.ndarray:
-        if self.kept < self.budget:
-            self.parts.append((o.astype(np.float32), d.astype(np.float32), t.astype(np.float32)))
-            self.kept += len(o)
-        return self._inner(o, d, t)
+    def __enter__(self) -> _Recorder:
+        recorder = self
+
+        def recording(occluder: Occluder, o: np.ndarray, d: np.ndarray, t: np.ndarray):  # type: ignore[no-untyped-def]
+            if recorder.kept < recorder.budget:
+                recorder.parts.append(
+                    (o.astype(np.float32), d.astype(np.float32), t.astype(np.float32))
+                )
+                recorder.kept += len(o)
+            return recorder.inner(occluder, o, d, t)
+
+        Occluder.occluded_local = recording  # type: ignore[method-assign]
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        Occluder.occluded_local = self.inner  # type: ignore[method-assign]
 
     def rays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         o, d, t = (np.concatenate([p[k] for p in self.parts]) for k in range(3))
@@ -64,20 +74,15 @@ def raw_throughput(occluder: Occluder, rays: tuple[np.ndarray, np.ndarray, np.nd
 def run(receivers: int, method: str, tolerance: float) -> dict[str, float | int | str]:
     scene = load_scene(ROOT / "scenes" / "cornell-box.obj")
     settings = api.RenderSettings(mesh=MeshSettings(receivers=receivers))
-    start = time.perf_counter()
-    prepared = api.prepare(scene, settings)
-    setup = prepared.timings.get("mesh", 0.0) + prepared.timings.get("acceleration", 0.0)
-    assert prepared.occluder is not None
-    recorder = _Recorder(prepared.occluder, budget=4_000_000)
-    prepared.occluder.occluded_local = recorder  # type: ignore[method-assign]
+    with _Recorder(budget=4_000_000) as recorder:
+        prepared = api.prepare(scene, settings)  # every column traced here, rays recorded
     try:
-        start = time.perf_counter()
-        engine = prepared.new_engine()  # form factors from scratch, rays recorded
-        form_factors = time.perf_counter() - start
-        result = solve(prepared.mesh, engine, SolveSettings(method=method, tolerance=tolerance))
-        engine.close()
-        prepared.occluder.occluded_local = recorder._inner  # type: ignore[method-assign]
+        setup = prepared.timings.get("mesh", 0.0) + prepared.timings.get("acceleration", 0.0)
+        form_factors = prepared.timings["form_factors"]
+        result = solve(prepared.mesh, prepared.engine, SolveSettings(method, tolerance))
+        assert prepared.occluder is not None
         raw = raw_throughput(prepared.occluder, recorder.rays())
+        rays = prepared.engine.rays_cast
     finally:
         prepared.close()
     state = result.state
@@ -91,8 +96,8 @@ def run(receivers: int, method: str, tolerance: float) -> dict[str, float | int 
         "setup_s": setup,
         "form_factor_s": form_factors,
         "solve_s": state.seconds,
-        "rays": engine.rays_cast,
-        "solve_rays_per_s": engine.rays_cast / tracing,
+        "rays": rays,
+        "solve_rays_per_s": rays / tracing,
         "embree_rays_per_s": raw,
     }
 

@@ -104,6 +104,19 @@ class _Collected:
         )
 
 
+def checked_path(path: str | os.PathLike[str], scale: float) -> tuple[Path, float]:
+    """The path of an existing regular file and a valid scale, or the error naming them."""
+    path = Path(path)
+    scale = float(scale)
+    if not (math.isfinite(scale) and scale > 0.0):
+        raise SettingsError(f"scale must be a finite number > 0, not {scale}")
+    if not path.exists():
+        raise SceneError(path, "file not found")
+    if not path.is_file():
+        raise SceneError(path, "not a regular file")
+    return path, scale
+
+
 def load_scene(path: str | os.PathLike[str], scale: float = 1.0) -> Scene:
     """Load a scene file, dispatching on its suffix through :data:`LOADERS`.
 
@@ -127,14 +140,7 @@ def load_scene(path: str | os.PathLike[str], scale: float = 1.0) -> Scene:
     SettingsError
         If ``scale`` is not a finite positive number.
     """
-    path = Path(path)
-    scale = float(scale)
-    if not (math.isfinite(scale) and scale > 0.0):
-        raise SettingsError(f"scale must be a finite number > 0, not {scale}")
-    if not path.exists():
-        raise SceneError(path, "file not found")
-    if not path.is_file():
-        raise SceneError(path, "not a regular file")
+    path, scale = checked_path(path, scale)
     loader = LOADERS.get(path.suffix.lower())
     if loader is None:
         supported = ", ".join(sorted(LOADERS))

@@ -34,8 +34,8 @@ import numpy as np
 
 from raytrad import colour_adapter
 from raytrad.camera import DEFAULT_VERTICAL_FOV_DEG, Camera
-from raytrad.errors import SceneError, SettingsError
-from raytrad.io.loaders import _Collected, _compact, _Material, load_scene
+from raytrad.errors import SceneError
+from raytrad.io.loaders import _Collected, _compact, _Material, checked_path, load_scene
 from raytrad.scene import Scene, triangle_areas_normals
 
 log = logging.getLogger(__name__)
@@ -136,14 +136,7 @@ def load_scene_description(path: str | os.PathLike[str], scale: float = 1.0) -> 
     SettingsError
         If ``scale`` is not a finite positive number.
     """
-    path = Path(path)
-    scale = float(scale)
-    if not (math.isfinite(scale) and scale > 0.0):
-        raise SettingsError(f"scale must be a finite number > 0, not {scale}")
-    if not path.exists():
-        raise SceneError(path, "file not found")
-    if not path.is_file():
-        raise SceneError(path, "not a regular file")
+    path, scale = checked_path(path, scale)
     description = _describe(_parse(path), scale)
     log.info(
         "%s: %d triangles, %d materials, %s",
