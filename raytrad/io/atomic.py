@@ -38,30 +38,51 @@ def atomic_write(path: str | os.PathLike[str], mode: str = "wb") -> Iterator[IO[
     """
     if mode not in _MODES:
         raise ValueError(f"atomic_write mode must be one of {_MODES}, not {mode!r}")
+    text = mode == "w"
+    with (
+        atomic_path(path, suffix=".tmp") as temporary,
+        open(
+            temporary, mode, encoding="utf-8" if text else None, newline="\n" if text else None
+        ) as handle,
+    ):
+        yield handle
+        handle.flush()
+        os.fsync(handle.fileno())
+
+
+@contextlib.contextmanager
+def atomic_path(path: str | os.PathLike[str], suffix: str | None = None) -> Iterator[Path]:
+    """A temporary path next to ``path`` that replaces ``path`` when the body succeeds.
+
+    For writers that take a file name (OpenImageIO chooses the format by extension, so the
+    default suffix keeps the target's). The file is fsynced before the rename; on error it
+    is removed and ``path`` is left as it was.
+
+    Parameters
+    ----------
+    path : path-like
+        The file to write; its parent directory is created if missing.
+    suffix : str or None
+        Suffix of the temporary name; default ``.tmp`` plus the target's suffix.
+    """
     target = Path(path)
     target.parent.mkdir(parents=True, exist_ok=True)
-    text = mode == "w"
-    # delete=False: once closed, the file is renamed over the target, or removed on error.
-    tmp = tempfile.NamedTemporaryFile(
-        mode=mode,
+    handle, name = tempfile.mkstemp(
         dir=target.parent,
         prefix=f".{target.name}.",
-        suffix=".tmp",
-        delete=False,
-        encoding="utf-8" if text else None,
-        newline="\n" if text else None,
+        suffix=f".tmp{target.suffix}" if suffix is None else suffix,
     )
-    tmp_path = Path(tmp.name)
+    os.close(handle)
+    temporary = Path(name)
     try:
-        with tmp:
-            yield tmp
-            tmp.flush()
-            os.fsync(tmp.fileno())
-        os.chmod(tmp_path, _final_permissions(target))
-        os.replace(tmp_path, target)
+        yield temporary
+        with open(temporary, "rb+") as written:
+            os.fsync(written.fileno())
+        os.chmod(temporary, _final_permissions(target))
+        os.replace(temporary, target)
     except BaseException:
         with contextlib.suppress(FileNotFoundError):
-            tmp_path.unlink()
+            temporary.unlink()
         raise
     _fsync_directory(target.parent)
 

@@ -11,17 +11,16 @@
 
 from __future__ import annotations
 
-import contextlib
 import logging
 import os
 import tempfile
-from collections.abc import Iterator, Mapping
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from raytrad.io.atomic import _final_permissions, _fsync_directory
+from raytrad.io.atomic import atomic_path
 
 log = logging.getLogger(__name__)
 
@@ -69,7 +68,7 @@ def write_exr(
     spec.attribute("compression", "zip")
     for name, value in (metadata or {}).items():
         spec.attribute(name, _attribute_value(value))
-    with _atomic_path(path) as temporary:
+    with atomic_path(path) as temporary:
         _write_file(temporary, pixels.astype(np.float32), spec)
 
 
@@ -92,7 +91,7 @@ def write_png(path: str | os.PathLike[str], rgb8: np.ndarray) -> None:
     spec = oiio.ImageSpec(width, height, channels, oiio.UINT8)
     spec.channelnames = _CHANNEL_NAMES[channels]
     spec.attribute("oiio:ColorSpace", "sRGB")
-    with _atomic_path(path) as temporary:
+    with atomic_path(path) as temporary:
         _write_file(temporary, rgb8, spec)
 
 
@@ -212,34 +211,6 @@ def _write_file(path: Path, pixels: np.ndarray, spec: Any) -> None:
             raise OSError(f"{path}: {output.geterror()}")
     finally:
         output.close()
-
-
-@contextlib.contextmanager
-def _atomic_path(path: str | os.PathLike[str]) -> Iterator[Path]:
-    """A temporary path beside ``path`` (same extension) that replaces it on success.
-
-    The counterpart of :func:`raytrad.io.atomic.atomic_write` for libraries that open
-    files by name: on an exception the temporary file is removed and ``path`` is left as
-    it was.
-    """
-    target = Path(path)
-    target.parent.mkdir(parents=True, exist_ok=True)
-    handle, name = tempfile.mkstemp(
-        dir=target.parent, prefix=f".{target.name}.", suffix=f".tmp{target.suffix}"
-    )
-    os.close(handle)
-    temporary = Path(name)
-    try:
-        yield temporary
-        with open(temporary, "rb+") as written:
-            os.fsync(written.fileno())
-        os.chmod(temporary, _final_permissions(target))
-        os.replace(temporary, target)
-    except BaseException:
-        with contextlib.suppress(FileNotFoundError):
-            temporary.unlink()
-        raise
-    _fsync_directory(target.parent)
 
 
 def _as_hwc(pixels: np.ndarray) -> np.ndarray:
