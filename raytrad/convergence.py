@@ -15,7 +15,7 @@ import numpy as np
 
 from raytrad.formfactor import FormFactorEngine
 from raytrad.mesh import RadiosityMesh
-from raytrad.solver import SolverState
+from raytrad.solver import SolverState, filled_capture
 
 #: Log points are spaced by this factor in shot count (plus every point while shots < 20).
 LOG_SPACING = 1.05
@@ -135,11 +135,7 @@ def error_estimate(
     -------
     (3,) float64 [1]
     """
-    known = np.isfinite(captured)
-    mean_capture = 1.0
-    if known.any():
-        mean_capture = float(np.average(captured[known], weights=patch_area[known]))
-    capture = np.where(known, captured, mean_capture)
+    capture = filled_capture(captured, patch_area)
     lost = np.maximum(patch_area @ (1.0 - patch_reflectance * capture[:, None]), 1e-300)
     # The signed unshot power is Feda's ambient; after overshooting, positive and negative
     # unshot radiosity partly cancel, and the signed sum can be near zero while the

@@ -268,12 +268,6 @@ class FormFactorEngine:
             self._pool.shutdown()
             self._pool = None
 
-    @property
-    def evaluation_points(self) -> np.ndarray:
-        """(R, 3) float64 where each receiver's factors are evaluated [m] (see
-        :func:`receiver_points`)."""
-        return self._points
-
     def column(self, patch: int) -> Column:
         """F(receiver <- patch) for every receiver that can see it (balanced, see
         :meth:`balance`, once that has run)."""

@@ -593,13 +593,10 @@ def _subareas(
     patch_emissive = np.zeros(count, dtype=bool)
     patch_emissive[patch[emissive]] = True
     target = np.where(patch_emissive, settings.emitter_samples, settings.samples)
-    sub_to_patch = np.arange(count)
 
     def split(labels: np.ndarray, extent: np.ndarray) -> np.ndarray:
-        nonlocal sub_to_patch
         cluster_patch = np.zeros(int(labels.max()) + 1, dtype=np.int64)
         cluster_patch[labels] = patch
-        sub_to_patch = cluster_patch
         have = np.bincount(cluster_patch, minlength=count)
         return np.asarray(have[cluster_patch] < target[cluster_patch])
 

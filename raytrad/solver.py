@@ -175,16 +175,22 @@ def _overrelaxation_amount(
     return settings.omega * state.unshot
 
 
+def filled_capture(captured: np.ndarray, patch_area: np.ndarray) -> np.ndarray:
+    """(P,) capture fractions, the area-weighted mean of the measured ones (1 before any
+    shot) standing in for patches that have not shot yet."""
+    known = np.isfinite(captured)
+    mean_capture = 1.0
+    if known.any():
+        mean_capture = float(np.average(captured[known], weights=patch_area[known]))
+    return np.where(known, captured, mean_capture)
+
+
 def _ambient_amount(problem: _Problem, state: SolverState, settings: SolveSettings) -> np.ndarray:
     """Formulas 3-5, with the measured capture fraction in the amplification."""
     unshot = state.unshot
     area = problem.patch_area
     unshot_power = area @ unshot  # (3,)
-    known = np.isfinite(state.captured)
-    mean_capture = 1.0
-    if known.any():
-        mean_capture = float(np.average(state.captured[known], weights=area[known]))
-    capture = np.where(known, state.captured, mean_capture)
+    capture = filled_capture(state.captured, area)
     lost = area @ (1.0 - problem.patch_reflectance * capture[:, None])  # (3,)
     ambient = unshot_power / np.maximum(lost, 1e-300 * area.sum())  # formula 3
     ambient = np.maximum(ambient, 0.0) * state.ambient_gain
