@@ -11,6 +11,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import logging
+import re
 import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
@@ -21,16 +22,16 @@ from typing import Any
 import numpy as np
 
 from raytrad import __version__
-from raytrad.camera import Camera
+from raytrad.camera import Camera, NamedCamera
 from raytrad.checkpoint import fingerprint, load_checkpoint, save_checkpoint
 from raytrad.convergence import ConvergenceMonitor, ErrorLog, Reference
 from raytrad.display import auto_exposure, display_colors
-from raytrad.errors import RaytradError, SettingsError
+from raytrad.errors import RaytradError, SceneError, SettingsError
 from raytrad.formfactor import RAY_OFFSET, FormFactorEngine, receiver_points
-from raytrad.image import framing_camera, render_radiance
+from raytrad.image import automatic_camera, render_radiance
 from raytrad.io.atomic import atomic_write
 from raytrad.io.exr import display_encode, encode_png, write_exr, write_png
-from raytrad.io.gltf import write_baked_glb
+from raytrad.io.gltf import BakedPart, write_baked_glb
 from raytrad.io.loaders import load_scene
 from raytrad.io.ply import write_radiosity_ply
 from raytrad.lightmap import (
@@ -42,7 +43,7 @@ from raytrad.lightmap import (
     write_lightmap,
     write_lightmap_preview,
 )
-from raytrad.mesh import MeshSettings, RadiosityMesh, build_mesh, hide_receivers
+from raytrad.mesh import MeshSettings, RadiosityMesh, build_mesh, fill_hidden, hide_receivers
 from raytrad.plot import plot_convergence
 from raytrad.reference import analytic_furnace, dense_solve, reference_from_ply
 from raytrad.repair import repair_scene
@@ -59,21 +60,29 @@ class ImageSettings:
 
     Attributes
     ----------
-    width, height : int
-        Image size [pixels].
+    width : int or None
+        Image width [pixels]; None: ``height`` times the aspect ratio of the scene file's
+        camera when it gives one (glTF ``aspectRatio``), else 640.
+    height : int
+        Image height [pixels].
     samples : int
         Samples per pixel (stratified; rounded down to a square).
     camera : Camera or None
-        None: the scene file's camera, else an automatic framing.
+        None: the scene file's camera (a TOML ``[camera]``, a glTF camera), else an
+        automatic framing.
+    view : str or None
+        Which of the scene file's cameras to use, by name (a glTF camera node's name);
+        None: the first. Ignored when ``camera`` is given.
     """
 
-    width: int = 640
+    width: int | None = None
     height: int = 480
     samples: int = 4
     camera: Camera | None = None
+    view: str | None = None
 
     def __post_init__(self) -> None:
-        if self.width < 1 or self.height < 1 or self.samples < 1:
+        if (self.width is not None and self.width < 1) or self.height < 1 or self.samples < 1:
             raise SettingsError("image width, height and samples must be at least 1")
 
 
@@ -300,7 +309,8 @@ def render(
     output_dir = Path(output_dir)
     timings: dict[str, float] = {}
     with _timed(timings, "load"):
-        scene, camera = _load(scene_path, settings.scale)
+        scene, camera = _load(scene_path, settings)
+        scene = checked_lightmap_uvs(scene, settings.lightmap)
     if not has_emission(scene):
         log.warning("%s: the scene has no emitter; every radiosity is zero", scene_path)
     prepared = prepare(scene, settings)
@@ -367,14 +377,94 @@ def render(
     return RenderOutcome(result, prepared, outputs, report, error_log)
 
 
-def _load(path: Path, scale: float) -> tuple[Scene, Camera | None]:
-    """The scene, and the camera a TOML scene file gives (None for other formats)."""
-    if path.suffix.lower() == ".toml" and path.is_file():
+def _load(path: Path, settings: RenderSettings) -> tuple[Scene, NamedCamera | None]:
+    """The scene (with the lightmap UV set asked for) and the camera of the scene file.
+
+    The camera is a TOML file's ``[camera]`` or a glTF file's camera (``image.view`` by
+    name, else the first), looked for only when an image is asked for; None otherwise.
+    """
+    scale = settings.scale
+    uv_set = None if settings.lightmap is None else settings.lightmap.uv_set_to_read
+    suffix = path.suffix.lower()
+    if suffix == ".toml" and path.is_file():
         from raytrad.io.toml_scene import load_scene_description
 
-        description = load_scene_description(path, scale=scale)
-        return description.scene, description.camera
-    return load_scene(path, scale=scale), None
+        description = load_scene_description(path, scale=scale, uv_set=uv_set)
+        camera = description.camera
+        named = None if camera is None else NamedCamera("camera", camera)
+        if settings.image is not None and settings.image.view not in (None, "camera"):
+            raise SettingsError(
+                f"{path}: has no camera named {settings.image.view!r} (a TOML scene file "
+                "has one [camera], named 'camera')"
+            )
+        return description.scene, named
+    scene = load_scene(path, scale=scale, uv_set=uv_set)
+    if settings.image is None or suffix not in (".gltf", ".glb"):
+        if settings.image is not None and settings.image.view is not None:
+            raise SettingsError(f"{path}: only glTF and TOML scene files have cameras to name")
+        return scene, None
+    return scene, _gltf_camera(path, scale, settings.image.view)
+
+
+def _gltf_camera(path: Path, scale: float, view: str | None) -> NamedCamera | None:
+    """The glTF camera named ``view`` (None: the first), or None when the file has none."""
+    from raytrad.io.gltf_camera import read_gltf_cameras
+
+    cameras = read_gltf_cameras(path, scale)
+    if view is None:
+        if len(cameras) > 1:
+            log.info(
+                "%s: %d cameras; using %r (choose with --view: %s)",
+                path,
+                len(cameras),
+                cameras[0].name,
+                ", ".join(repr(c.name) for c in cameras),
+            )
+        return cameras[0] if cameras else None
+    for named in cameras:
+        if named.name == view:
+            return named
+    names = ", ".join(repr(c.name) for c in cameras) or "none"
+    raise SettingsError(f"{path}: no camera named {view!r} (its cameras: {names})")
+
+
+def checked_lightmap_uvs(scene: Scene, settings: LightmapSettings | None) -> Scene:
+    """The scene with the lightmap UVs the settings will bake with, or without any.
+
+    With ``uv_set="auto"`` the model's UVs are kept only when every face has them (else an
+    atlas is generated, with a warning when only some faces have them); with an index
+    every face must have them.
+
+    Raises
+    ------
+    SceneError
+        An explicit UV set that some faces lack, naming the file, the set and an object.
+    """
+    uv = scene.lightmap_uv
+    if settings is None or uv is None or settings.uv_set == "atlas":
+        return dataclasses.replace(scene, lightmap_uv=None)
+    missing = ~np.isfinite(uv).all(axis=(1, 2))
+    if not missing.any():
+        log.info("%s: baking into the model's UV set %s", scene.source, settings.uv_set_to_read)
+        return scene
+    count, total = int(missing.sum()), scene.triangle_count
+    where = scene.object_names[int(scene.object_index[np.argmax(missing)])]
+    if settings.uv_set == "auto":
+        if count < total:
+            log.warning(
+                "%s: UV set 1 (TEXCOORD_1) is missing on %d of %d faces (object %r); "
+                "generating a lightmap atlas instead",
+                scene.source,
+                count,
+                total,
+                where,
+            )
+        return dataclasses.replace(scene, lightmap_uv=None)
+    raise SceneError(
+        scene.source,
+        f"UV set {settings.uv_set} is missing on {count} of {total} faces (first in object "
+        f"{where!r}); omit --uv-set or use --uv-set atlas to generate a lightmap atlas",
+    )
 
 
 def _write_outputs(
@@ -383,33 +473,29 @@ def _write_outputs(
     output_dir: Path,
     stem: str,
     settings: RenderSettings,
-    camera: Camera | None = None,
+    camera: NamedCamera | None = None,
 ) -> tuple[dict[str, Path], dict[str, Any]]:
     """Write every asked-for output; return their paths and facts for the report."""
     mesh = prepared.mesh
     emitting = np.asarray((mesh.receiver_emitted_exitance > 0).any(axis=1))
     exposure = auto_exposure(result.radiosity, emitting) * 2.0**settings.exposure
-    colors = display_colors(result.radiosity, emitting, settings.exposure)
+    # hidden receivers take their visible neighbours' radiosity in what is shown
+    shown = fill_hidden(mesh, result.radiosity)
+    colors = display_colors(shown, emitting, settings.exposure)
     outputs = {"ply": output_dir / f"{stem}.ply"}
     facts: dict[str, Any] = {"exposure": exposure}
     write_radiosity_ply(
         outputs["ply"], mesh.receiver_position, mesh.triangle_receivers, result.radiosity, colors
     )
     metadata = {"scene": str(prepared.scene.source or stem), "method": result.method}
-    lightmap = None
+    lightmaps: list[Lightmap] = []
     if settings.lightmap is not None:
-        lightmap = bake_lightmap(mesh, result.radiosity, settings.lightmap)
-        outputs["lightmap"] = output_dir / f"{stem}.lightmap.exr"
-        outputs["lightmap_preview"] = output_dir / f"{stem}.lightmap.png"
-        write_lightmap(outputs["lightmap"], lightmap, metadata)
-        write_lightmap_preview(outputs["lightmap_preview"], lightmap, exposure)
-        facts["lightmap"] = {"size": list(lightmap.size), **lightmap.stats}
+        lightmaps = _bake_lightmaps(prepared, shown, settings.lightmap)
+        _write_lightmaps(lightmaps, output_dir, stem, metadata, exposure, outputs, facts)
     if settings.image is not None:
+        view, width = _image_view(mesh, settings.image, camera)
         image = settings.image
-        view = image.camera or camera or framing_camera(mesh.positions)
-        radiance = render_radiance(
-            mesh, result.radiosity, view, image.width, image.height, image.samples
-        )
+        radiance = render_radiance(mesh, shown, view, width, image.height, image.samples)
         outputs["image"] = output_dir / f"{stem}.exr"
         outputs["image_preview"] = output_dir / f"{stem}.png"
         write_exr(
@@ -424,37 +510,137 @@ def _write_outputs(
         )
         write_png(outputs["image_preview"], display_encode(radiance * exposure))
         facts["camera"] = dataclasses.asdict(view)
+        facts["camera"]["name"] = (
+            "settings" if image.camera else camera.name if camera else "automatic framing"
+        )
     if settings.gltf:
         outputs["gltf"] = output_dir / f"{stem}.glb"
-        _write_gltf(outputs["gltf"], mesh, result.radiosity, exposure, lightmap)
+        _write_gltf(outputs["gltf"], prepared, shown, exposure, lightmaps)
     return outputs, facts
 
 
 def _write_gltf(
     path: Path,
-    mesh: RadiosityMesh,
+    prepared: Prepared,
     radiosity: np.ndarray,
     exposure: float,
-    lightmap: Lightmap | None,
+    lightmaps: list[Lightmap],
 ) -> None:
-    radiance = radiosity / np.pi
-    if lightmap is None:
-        receiver = np.arange(mesh.receiver_count)
-        triangles, uv, png = mesh.triangle_receivers, None, None
-    else:
-        receiver, triangles, uv = lightmap_vertices(mesh, lightmap)
-        png = encode_png(lightmap_preview(lightmap, exposure))
+    """The baked model: one node per object, with its lightmap when one was baked."""
+    mesh = prepared.mesh
+    colour = radiosity / np.pi * exposure
+    parts = []
+    pngs = [encode_png(lightmap_preview(lightmap, exposure)) for lightmap in lightmaps]
+    by_name = {lightmap.name: k for k, lightmap in enumerate(lightmaps)}
+    for name, rows in _object_triangles(prepared):
+        uv, png = None, None
+        if lightmaps:
+            k = by_name.get(name, 0)  # a scene lightmap is named ""
+            png = pngs[k]
+            receiver, triangles, uv = lightmap_vertices(mesh, lightmaps[k], rows)
+        else:
+            receiver, local = np.unique(mesh.triangle_receivers[rows], return_inverse=True)
+            triangles = local.reshape(-1, 3)
+        parts.append(
+            BakedPart(
+                name,
+                mesh.receiver_position[receiver],
+                mesh.receiver_normal[receiver],
+                triangles,
+                colour[receiver],
+                uv,
+                png,
+            )
+        )
     write_baked_glb(
         path,
-        mesh.receiver_position[receiver],
-        mesh.receiver_normal[receiver],
-        triangles,
-        radiance[receiver] * exposure,
+        parts,
         exposure,
-        uv,
-        png,
         {"version": __version__, "colour": "linear Rec.709: radiance [W sr-1 m-2] x exposure"},
     )
+
+
+def _image_view(
+    mesh: RadiosityMesh, image: ImageSettings, camera: NamedCamera | None
+) -> tuple[Camera, int]:
+    """The camera to render from and the image width [pixels] (see :class:`ImageSettings`)."""
+    if image.camera is not None:
+        return image.camera, image.width or 640
+    if camera is None:
+        return automatic_camera(mesh), image.width or 640
+    aspect = camera.aspect_ratio
+    width = image.width or (max(1, round(image.height * aspect)) if aspect else 640)
+    return camera.camera, width
+
+
+def _object_triangles(prepared: Prepared) -> list[tuple[str, np.ndarray]]:
+    """Each object's name and (t,) indices of its refined mesh triangles, objects in order."""
+    scene = prepared.scene
+    owner = scene.object_index[prepared.mesh.triangle_source]
+    return [
+        (name, np.flatnonzero(owner == i))
+        for i, name in enumerate(scene.object_names)
+        if (owner == i).any()
+    ]
+
+
+def _bake_lightmaps(
+    prepared: Prepared, radiosity: np.ndarray, settings: LightmapSettings
+) -> list[Lightmap]:
+    """One lightmap for the scene, or one per object with ``settings.per_mesh``."""
+    scene, mesh = prepared.scene, prepared.mesh
+    uv = scene.lightmap_uv
+    corners = None if uv is None else scene.triangle_vertices()
+    if not settings.per_mesh:
+        return [bake_lightmap(mesh, radiosity, settings, uv, corners)]
+    return [
+        bake_lightmap(mesh, radiosity, settings, uv, corners, rows, name)
+        for name, rows in _object_triangles(prepared)
+    ]
+
+
+def _file_names(names: list[str]) -> list[str]:
+    """Names made safe and unique for file names ("a/b c" -> "a_b_c", repeats numbered)."""
+    out: list[str] = []
+    for name in names:
+        safe = re.sub(r"[^A-Za-z0-9._-]+", "_", name).strip("._") or "mesh"
+        base, k = safe, 0
+        while safe.lower() in (o.lower() for o in out):
+            k += 1
+            safe = f"{base}_{k}"
+        out.append(safe)
+    return out
+
+
+def _write_lightmaps(
+    lightmaps: list[Lightmap],
+    output_dir: Path,
+    stem: str,
+    metadata: dict[str, str],
+    exposure: float,
+    outputs: dict[str, Path],
+    facts: dict[str, Any],
+) -> None:
+    """Write each lightmap's EXR and preview PNG; record paths and statistics.
+
+    One scene lightmap is ``<stem>.lightmap.exr``; per-mesh ones are
+    ``<stem>.<object>.lightmap.exr`` under output keys ``lightmap:<object>``.
+    """
+    if len(lightmaps) == 1 and not lightmaps[0].name:
+        lightmap = lightmaps[0]
+        outputs["lightmap"] = output_dir / f"{stem}.lightmap.exr"
+        outputs["lightmap_preview"] = output_dir / f"{stem}.lightmap.png"
+        write_lightmap(outputs["lightmap"], lightmap, metadata)
+        write_lightmap_preview(outputs["lightmap_preview"], lightmap, exposure)
+        facts["lightmap"] = {"size": list(lightmap.size), **lightmap.stats}
+        return
+    facts["lightmaps"] = {}
+    for lightmap, safe in zip(lightmaps, _file_names([m.name for m in lightmaps]), strict=True):
+        exr = outputs[f"lightmap:{lightmap.name}"] = output_dir / f"{stem}.{safe}.lightmap.exr"
+        png = outputs[f"lightmap_preview:{lightmap.name}"] = exr.with_suffix(".png")
+        write_lightmap(exr, lightmap, {**metadata, "object": lightmap.name})
+        write_lightmap_preview(png, lightmap, exposure)
+        facts["lightmaps"][lightmap.name] = {"size": list(lightmap.size), **lightmap.stats}
 
 
 def build_report(

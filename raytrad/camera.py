@@ -47,3 +47,24 @@ class Camera:
         right = np.cross(forward, self.up)
         right /= np.linalg.norm(right)
         return right, np.cross(right, forward), forward
+
+
+@dataclass(frozen=True)
+class NamedCamera:
+    """A camera a scene file names (a glTF camera node, a TOML ``[camera]``).
+
+    Attributes
+    ----------
+    name : str
+        glTF: the node's name, else the camera's, else ``"camera <i>"`` (``i`` the camera
+        index); TOML: ``"camera"``.
+    camera : Camera
+        Position [m], ``look_at`` one metre along the view direction [m], unit up vector,
+        vertical field of view [degrees].
+    aspect_ratio : float or None
+        Width over height [1] the file asks for, or None if it leaves it to the viewport.
+    """
+
+    name: str
+    camera: Camera
+    aspect_ratio: float | None = None

@@ -95,12 +95,30 @@ def build_parser() -> argparse.ArgumentParser:
         help="write the lightmap as 32-bit float instead of half",
     )
     outputs.add_argument(
+        "--uv-set",
+        default="auto",
+        metavar="auto|atlas|N",
+        help="lightmap UVs: 'auto' uses the model's glTF TEXCOORD_1 when every face has it, "
+        "else generates an atlas; 'atlas' always generates one; N uses the model's UV set N "
+        "(glTF TEXCOORD_N; OBJ vt and PLY s,t are set 0) (default: %(default)s)",
+    )
+    outputs.add_argument(
+        "--lightmap-per-mesh",
+        action="store_true",
+        help="one lightmap per mesh (glTF node, TOML [[mesh]]): DIR/<name>.<mesh>.lightmap.exr",
+    )
+    outputs.add_argument(
         "--image",
         action="store_true",
         help="render DIR/<name>.exr (linear radiance [W sr-1 m-2]) and "
         "DIR/<name>.png (exposed, sRGB) from a camera",
     )
-    outputs.add_argument("--width", type=int, default=None, help="image width (default: 640)")
+    outputs.add_argument(
+        "--width",
+        type=int,
+        default=None,
+        help="image width (default: height x the glTF camera's aspect ratio, else 640)",
+    )
     outputs.add_argument("--height", type=int, default=None, help="image height (default: 480)")
     outputs.add_argument(
         "--spp",
@@ -113,7 +131,14 @@ def build_parser() -> argparse.ArgumentParser:
         default=None,
         metavar="X,Y,Z:TX,TY,TZ[:FOV]",
         help="camera position and look-at point [m] and vertical field of "
-        "view [degrees]; default: the scene file's, else an automatic framing",
+        "view [degrees]; default: the scene file's (TOML [camera], glTF camera), else an "
+        "automatic framing",
+    )
+    outputs.add_argument(
+        "--view",
+        default=None,
+        metavar="NAME",
+        help="which of a glTF file's cameras to render from, by node name (default: the first)",
     )
     outputs.add_argument(
         "--gltf",
@@ -347,6 +372,15 @@ def _parse_camera(text: str) -> Any:
     return Camera(position, target, vertical_fov_deg=fov)
 
 
+def _uv_set(text: str) -> int | str:
+    """``--uv-set``: 'auto', 'atlas' or a set index >= 0."""
+    if text in ("auto", "atlas"):
+        return text
+    if text.isdigit():
+        return int(text)
+    raise SettingsError(f"--uv-set wants auto, atlas or a UV set number >= 0, got {text!r}")
+
+
 def _output_settings(args: argparse.Namespace) -> dict[str, Any]:
     """Lightmap, image and glTF settings from the options, over a TOML file's [output]."""
     from raytrad.api import ImageSettings
@@ -368,13 +402,20 @@ def _output_settings(args: argparse.Namespace) -> dict[str, Any]:
             texel_density=None if density is None else float(density),
             padding=args.lightmap_padding,
             half=not args.lightmap_float,
+            uv_set=_uv_set(args.uv_set),
+            per_mesh=args.lightmap_per_mesh,
         )
+    elif args.uv_set != "auto" or args.lightmap_per_mesh:
+        raise SettingsError("--uv-set and --lightmap-per-mesh need --lightmap")
+    if args.view is not None and not args.image:
+        raise SettingsError("--view needs --image")
     if args.image:
         out["image"] = ImageSettings(
-            width=args.width or int(file_output.get("image_width", 640)),
+            width=args.width or file_output.get("image_width"),
             height=args.height or int(file_output.get("image_height", 480)),
             samples=args.spp,
             camera=None if args.camera is None else _parse_camera(args.camera),
+            view=args.view,
         )
     return out
 

@@ -17,6 +17,122 @@ from raytrad.errors import SettingsError
 from raytrad.mesh import RadiosityMesh
 from raytrad.visibility import Occluder
 
+#: Directions from the scene's centre toward outside viewpoints tried by
+#: :func:`automatic_camera`, after the classic front view of :func:`framing_camera`:
+#: elevated three-quarter views, then the four sides.
+_OUTSIDE_VIEWS = (
+    (1.0, 0.8, -1.0),
+    (-1.0, 0.8, -1.0),
+    (1.0, 0.8, 1.0),
+    (-1.0, 0.8, 1.0),
+    (0.0, 0.0, 1.0),
+    (1.0, 0.0, 0.0),
+    (-1.0, 0.0, 0.0),
+)
+#: Fraction of the frame covered by surfaces that counts as filled for the view score.
+_FULL_COVERAGE = 0.5
+#: Horizontal directions in which inside viewpoints stand back from the centre.
+_INSIDE_VIEWS = ((0.0, 0.0, -1.0), (0.0, 0.0, 1.0), (1.0, 0.0, 0.0), (-1.0, 0.0, 0.0))
+
+
+def automatic_camera(
+    mesh: RadiosityMesh, vertical_fov_deg: float = 39.3, probe: tuple[int, int] = (48, 36)
+) -> Camera:
+    """The camera for a scene that gives none: the candidate view seeing the most surface.
+
+    Candidates are the classic front view (:func:`framing_camera`), elevated
+    three-quarter and side views from outside the bounding box (all of it in frame), and
+    views from inside it, standing back from the centre toward each side (for closed
+    rooms, whose outside is the back of their walls). Each is scored by a
+    ``probe``-sized image of primary rays: the fraction of surface hits that see a lit side
+    (front of a one-sided face, either side of a two-sided one, not the black back of a
+    wall), times the fraction of the frame covered by surfaces up to a half (views that
+    see the scene edge-on or as a speck score low). The first candidate
+    within 10 % of the best score wins, so the front view is kept whenever it sees nearly
+    as much as any other (y is up).
+
+    Parameters
+    ----------
+    mesh : RadiosityMesh
+    vertical_fov_deg : float [degrees]
+    probe : (int, int)
+        Width and height of the scoring images [pixels].
+
+    Returns
+    -------
+    Camera
+    """
+    candidates = _candidate_cameras(mesh.positions, vertical_fov_deg)
+    _, normal = _triangle_normals(mesh)
+    twin = twin_triangles(mesh.triangles)
+    occluder = Occluder(mesh.positions, mesh.triangles)
+    try:
+        scores = []
+        for camera in candidates:
+            origin = occluder.to_local(np.asarray(camera.position, dtype=np.float64)[None, :])
+            direction = _primary_directions(camera, probe[0], probe[1], 0.5, 0.5)
+            hit, _, _ = occluder.intersect_barycentric_local(
+                np.broadcast_to(origin, direction.shape), direction
+            )
+            seen = hit >= 0
+            facing = np.einsum("ij,ij->i", normal[hit[seen]], direction[seen]) < 0
+            lit = float((facing | (twin[hit[seen]] >= 0)).sum())
+            coverage = seen.mean()
+            scores.append(lit / max(seen.sum(), 1) * min(1.0, coverage / _FULL_COVERAGE))
+    finally:
+        occluder.close()
+    best = max(scores)
+    return candidates[next(i for i, score in enumerate(scores) if score >= 0.9 * best)]
+
+
+def _candidate_cameras(positions: np.ndarray, vertical_fov_deg: float) -> list[Camera]:
+    """The views :func:`automatic_camera` chooses from."""
+    lo, hi = positions.min(axis=0), positions.max(axis=0)
+    centre = 0.5 * (lo + hi)
+    half = 0.5 * (hi - lo)
+    radius = float(np.linalg.norm(half))
+    distance = 1.05 * radius / math.sin(math.radians(vertical_fov_deg) / 2.0)
+    target = (float(centre[0]), float(centre[1]), float(centre[2]))
+    cameras = [framing_camera(positions, vertical_fov_deg)]
+    for view in _OUTSIDE_VIEWS:
+        direction = np.asarray(view) / np.linalg.norm(view)
+        position = centre + distance * direction
+        cameras.append(Camera(_triple(position), target, (0.0, 1.0, 0.0), vertical_fov_deg))
+    wide = max(vertical_fov_deg, 60.0)
+    for view in _INSIDE_VIEWS:
+        position = centre + 0.8 * half * np.asarray(view)
+        cameras.append(Camera(_triple(position), target, (0.0, 1.0, 0.0), wide))
+    return cameras
+
+
+def _triple(values: np.ndarray) -> tuple[float, float, float]:
+    return (float(values[0]), float(values[1]), float(values[2]))
+
+
+def _primary_directions(
+    camera: Camera,
+    width: int,
+    height: int,
+    jitter_x: np.ndarray | float,
+    jitter_y: np.ndarray | float,
+) -> np.ndarray:
+    """(height * width, 3) unit ray directions through each pixel at the given offsets.
+
+    ``jitter_x``, ``jitter_y``: position inside the pixel in [0, 1) (scalars or
+    (height, width) arrays); row 0 is the top of the image.
+    """
+    right, up, forward = camera.basis()
+    tan = math.tan(math.radians(camera.vertical_fov_deg) / 2.0)
+    ys, xs = np.mgrid[0:height, 0:width]
+    px = (xs + jitter_x) / width * 2.0 - 1.0
+    py = 1.0 - (ys + jitter_y) / height * 2.0
+    direction = (
+        forward[None, None, :]
+        + (px * tan * width / height)[..., None] * right
+        + (py * tan)[..., None] * up
+    ).reshape(-1, 3)
+    return np.asarray(direction / np.linalg.norm(direction, axis=1)[:, None])
+
 
 def framing_camera(positions: np.ndarray, vertical_fov_deg: float = 39.3) -> Camera:
     """A camera looking along +z at the scene's bounding box, far enough to see all of it.
@@ -78,9 +194,6 @@ def render_radiance(
     if width < 1 or height < 1:
         raise SettingsError(f"image size must be positive, got {width}x{height}")
     side = max(1, math.isqrt(max(1, samples)))
-    right, up, forward = camera.basis()
-    tan = math.tan(math.radians(camera.vertical_fov_deg) / 2.0)
-    aspect = width / height
     rng = np.random.default_rng(seed)
     _, normal = _triangle_normals(mesh)
     twin = twin_triangles(mesh.triangles)
@@ -88,18 +201,12 @@ def render_radiance(
     occluder = Occluder(mesh.positions, mesh.triangles)
     try:
         origin = occluder.to_local(np.asarray(camera.position, dtype=np.float64)[None, :])
-        ys, xs = np.mgrid[0:height, 0:width]
         for sy in range(side):
             for sx in range(side):
                 jitter = rng.random((2, height, width))
-                px = (xs + (sx + jitter[0]) / side) / width * 2.0 - 1.0
-                py = 1.0 - (ys + (sy + jitter[1]) / side) / height * 2.0
-                direction = (
-                    forward[None, None, :]
-                    + (px * tan * aspect)[..., None] * right
-                    + (py * tan)[..., None] * up
-                ).reshape(-1, 3)
-                direction /= np.linalg.norm(direction, axis=1)[:, None]
+                direction = _primary_directions(
+                    camera, width, height, (sx + jitter[0]) / side, (sy + jitter[1]) / side
+                )
                 hit, _, weights = occluder.intersect_barycentric_local(
                     np.broadcast_to(origin, direction.shape), direction
                 )

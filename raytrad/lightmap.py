@@ -65,17 +65,22 @@ class LightmapSettings:
         Empty texels between charts of a generated atlas [texels] (filled by dilation).
     half : bool
         Store 16-bit half floats in the EXR (else 32-bit float).
-    uv_set : int or None
-        Index of the model's texture-coordinate set holding its lightmap UVs (glTF
-        ``TEXCOORD_<n>``, usually 1); None generates an atlas with xatlas. The UVs
-        themselves are passed to :func:`bake_lightmap`.
+    uv_set : int or str
+        Where the lightmap UVs come from: ``"auto"`` (the model's glTF ``TEXCOORD_1``
+        when every face has it, else a generated atlas), ``"atlas"`` (always generate one
+        with xatlas), or the index of the model's texture-coordinate set (glTF
+        ``TEXCOORD_<n>``; OBJ ``vt`` and PLY ``s, t`` are set 0), which every face must
+        have. The UVs themselves are passed to :func:`bake_lightmap`.
+    per_mesh : bool
+        One lightmap per mesh (glTF node, TOML ``[[mesh]]``) instead of one per scene.
     """
 
     resolution: int = 1024
     texel_density: float | None = None
     padding: int = 4
     half: bool = True
-    uv_set: int | None = None
+    uv_set: int | str = "auto"
+    per_mesh: bool = False
 
     def __post_init__(self) -> None:
         if not 8 <= self.resolution <= MAX_ATLAS_SIZE:
@@ -87,8 +92,18 @@ class LightmapSettings:
             raise SettingsError(f"texel density must be a positive number, not {density}")
         if self.padding < 0:
             raise SettingsError(f"lightmap padding must be >= 0 texels, not {self.padding}")
-        if self.uv_set is not None and self.uv_set < 0:
-            raise SettingsError(f"uv set must be >= 0, not {self.uv_set}")
+        uv_set = self.uv_set
+        if isinstance(uv_set, bool) or not (
+            uv_set in ("auto", "atlas") or (isinstance(uv_set, int) and uv_set >= 0)
+        ):
+            raise SettingsError(f"uv set must be 'auto', 'atlas' or an index >= 0, not {uv_set!r}")
+
+    @property
+    def uv_set_to_read(self) -> int | None:
+        """The model's texture-coordinate set to load: 1 for auto, None for atlas."""
+        if self.uv_set == "atlas":
+            return None
+        return 1 if self.uv_set == "auto" else int(self.uv_set)
 
 
 @dataclass(frozen=True, eq=False)
@@ -108,6 +123,11 @@ class Lightmap:
         [texels m-1] (area-weighted over triangles), ``covered_fraction`` [1] and
         ``seconds`` (bake time) [s].
     settings : LightmapSettings
+    triangles : (T,) int64 or None
+        The refined mesh triangles this lightmap covers (one mesh's, per-mesh); None: all,
+        in mesh order. ``uv`` rows follow this order.
+    name : str
+        The object the lightmap belongs to ("" for the whole scene).
     """
 
     pixels: np.ndarray
@@ -115,6 +135,8 @@ class Lightmap:
     uv: np.ndarray
     stats: dict[str, float]
     settings: LightmapSettings = field(default_factory=LightmapSettings)
+    triangles: np.ndarray | None = None
+    name: str = ""
 
     @property
     def size(self) -> tuple[int, int]:
@@ -132,6 +154,7 @@ def lightmap_uvs(
     settings: LightmapSettings | None = None,
     existing_uv: np.ndarray | None = None,
     source_corners: np.ndarray | None = None,
+    triangles: np.ndarray | None = None,
 ) -> tuple[np.ndarray, tuple[int, int]]:
     """Lightmap coordinates of every refined triangle corner, in texel space.
 
@@ -147,20 +170,25 @@ def lightmap_uvs(
         Corner positions [m] of those scene triangles, in the order of ``existing_uv``
         (``scene.triangle_vertices()``); required with ``existing_uv``. Each refined corner
         takes the UV at its barycentric position in its scene triangle.
+    triangles : (t,) int or None
+        Lay out only these refined triangles (one mesh's); None: all.
 
     Returns
     -------
     uv : (T, 3, 2) float64 [texels]
+        Of ``triangles`` when given (t rows).
     size : (int, int)
         Atlas width and height [texels]. With existing UVs the atlas is square: of
         ``settings.resolution``, or sized for ``settings.texel_density`` at the median.
     """
     settings = settings or LightmapSettings()
+    rows = np.arange(len(mesh.triangles)) if triangles is None else np.asarray(triangles)
     if existing_uv is None:
         density = settings.texel_density
+        used, local = np.unique(mesh.triangle_receivers[rows], return_inverse=True)
         _, new_triangles, uvs, size = generate_atlas(
-            mesh.receiver_position,
-            mesh.triangle_receivers,
+            mesh.receiver_position[used],
+            local.reshape(-1, 3),
             resolution=None if density is not None else settings.resolution,
             texel_density=density,
             padding=settings.padding,
@@ -168,11 +196,11 @@ def lightmap_uvs(
         return uvs[new_triangles] * np.asarray(size, dtype=np.float64), size
     if source_corners is None:
         raise ValueError("existing lightmap UVs need the scene triangle corners to map through")
-    unit_uv = transfer_uvs(mesh, existing_uv, source_corners)
+    unit_uv = transfer_uvs(mesh, existing_uv, source_corners)[rows]
     if settings.texel_density is None:
         side = settings.resolution
     else:
-        median = texel_density_stats(unit_uv, mesh.triangle_area)["texel_density_median"]
+        median = texel_density_stats(unit_uv, mesh.triangle_area[rows])["texel_density_median"]
         side = math.ceil(settings.texel_density / median) if median > 0 else 0
         if not 8 <= side <= MAX_ATLAS_SIZE:
             raise SettingsError(
@@ -573,6 +601,8 @@ def bake_lightmap(
     settings: LightmapSettings | None = None,
     existing_uv: np.ndarray | None = None,
     source_corners: np.ndarray | None = None,
+    triangles: np.ndarray | None = None,
+    name: str = "",
 ) -> Lightmap:
     """Bake receiver radiosity into a lightmap atlas.
 
@@ -586,6 +616,11 @@ def bake_lightmap(
         The model's lightmap UVs and the corners they belong to (see
         :func:`lightmap_uvs`); None generates an atlas. Where the two sides of a
         double-sided face share UVs, the front side's radiosity is baked.
+    triangles : (t,) int or None
+        Bake only these refined triangles (one mesh, for per-mesh lightmaps; kept sorted
+        in :attr:`Lightmap.triangles`); None: all.
+    name : str
+        The object's name, kept in :attr:`Lightmap.name`.
 
     Returns
     -------
@@ -595,23 +630,25 @@ def bake_lightmap(
     radiosity = np.asarray(radiosity, dtype=np.float64)
     if radiosity.shape != (mesh.receiver_count, 3):
         raise ValueError(f"radiosity must be ({mesh.receiver_count}, 3), not {radiosity.shape}")
-    if settings.uv_set is not None and existing_uv is None:
+    if isinstance(settings.uv_set, int) and existing_uv is None:
         raise SettingsError(f"uv set {settings.uv_set} was asked for but no UVs were given")
     started = time.perf_counter()
-    uv, size = lightmap_uvs(mesh, settings, existing_uv, source_corners)
+    rows = np.arange(len(mesh.triangles)) if triangles is None else np.unique(triangles)
+    uv, size = lightmap_uvs(mesh, settings, existing_uv, source_corners, rows)
     priority = None
     if existing_uv is not None and source_corners is not None:
-        priority = _back_copies(mesh, np.asarray(source_corners, dtype=np.float64))
-    values = radiosity[mesh.triangle_receivers]
+        priority = _back_copies(mesh, np.asarray(source_corners, dtype=np.float64))[rows]
+    values = radiosity[mesh.triangle_receivers[rows]]
     pixels, coverage = rasterize(uv, values, size, priority)
 
     grown, reached = grow_charts(pixels, coverage, max(settings.padding, 1))
     filled = dilate(grown, reached)
-    stats = texel_density_stats(uv, mesh.triangle_area)
+    stats = texel_density_stats(uv, mesh.triangle_area[rows])
     stats["covered_fraction"] = float(coverage.mean())
     stats["seconds"] = time.perf_counter() - started
     log.info(
-        "lightmap %d x %d: %.1f %% covered, %.4g to %.4g texels m-1 (median %.4g), %.2f s",
+        "lightmap%s %d x %d: %.1f %% covered, %.4g to %.4g texels m-1 (median %.4g), %.2f s",
+        f" {name!r}" if name else "",
         size[0],
         size[1],
         100.0 * stats["covered_fraction"],
@@ -621,7 +658,9 @@ def bake_lightmap(
         stats["seconds"],
     )
     normalised = uv / np.asarray(size, dtype=np.float64)
-    return Lightmap(filled, coverage, normalised, stats, settings)
+    return Lightmap(
+        filled, coverage, normalised, stats, settings, None if triangles is None else rows, name
+    )
 
 
 def _back_copies(mesh: RadiosityMesh, source_corners: np.ndarray) -> np.ndarray:
@@ -632,28 +671,39 @@ def _back_copies(mesh: RadiosityMesh, source_corners: np.ndarray) -> np.ndarray:
 
 
 def lightmap_vertices(
-    mesh: RadiosityMesh, lightmap: Lightmap
+    mesh: RadiosityMesh, lightmap: Lightmap, triangles: np.ndarray | None = None
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """An indexed mesh carrying the lightmap UVs (for glTF ``TEXCOORD_1``).
 
     Receivers are split where their corners have different UVs (on chart seams); the
     rest stay shared. UVs closer than 2**-24 are taken as equal.
 
+    Parameters
+    ----------
+    mesh : RadiosityMesh
+    lightmap : Lightmap
+    triangles : (t,) int or None
+        Refined mesh triangles to include (one object's), all of them in the lightmap;
+        None: every triangle of the lightmap.
+
     Returns
     -------
     receiver : (N,) int64
         The receiver each vertex stands for (index ``receiver_position``, radiosity...).
-    triangles : (T, 3) int64
-        Vertex indices of each refined triangle, in mesh order and winding.
+    triangles : (t, 3) int64
+        Vertex indices of each included triangle, in the given order and mesh winding.
     uv : (N, 2) float64
         Normalised lightmap UV [1] (row 0 at the top).
     """
-    corner_receiver = mesh.triangle_receivers.reshape(-1)
-    corner_uv = lightmap.uv.reshape(-1, 2)
+    covered = np.arange(len(mesh.triangles)) if lightmap.triangles is None else lightmap.triangles
+    local = np.arange(len(covered)) if triangles is None else np.searchsorted(covered, triangles)
+    if triangles is not None and not np.array_equal(covered[local % len(covered)], triangles):
+        raise ValueError("the lightmap does not cover every triangle asked for")
+    corner_receiver = mesh.triangle_receivers[covered[local]].reshape(-1)
+    corner_uv = lightmap.uv[local].reshape(-1, 2)
     key = np.column_stack([corner_receiver, np.round(corner_uv * 2.0**24).astype(np.int64)])
     _, first, inverse = np.unique(key, axis=0, return_index=True, return_inverse=True)
-    triangles = inverse.reshape(-1, 3)
-    return corner_receiver[first], triangles, corner_uv[first]
+    return corner_receiver[first], inverse.reshape(-1, 3), corner_uv[first]
 
 
 def lightmap_metadata(

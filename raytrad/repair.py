@@ -39,9 +39,7 @@ def repair_scene(scene: Scene) -> Scene:
             where,
             int((~keep).sum()),
         )
-        scene = replace(
-            scene, triangles=scene.triangles[keep], material_index=scene.material_index[keep]
-        )
+        scene = scene.select(keep)
         merged = merged[keep]
     areas, _ = triangle_areas_normals(scene.triangle_vertices())
     flip = inverted_faces(merged, areas)
@@ -52,9 +50,7 @@ def repair_scene(scene: Scene) -> Scene:
             where,
             int(flip.sum()),
         )
-        triangles = scene.triangles.copy()
-        triangles[flip] = triangles[flip][:, ::-1]
-        scene = replace(scene, triangles=triangles)
+        scene = scene.flipped(flip)
     return scene
 
 
@@ -152,9 +148,14 @@ _REPAIR_WORK_LIMIT = 50_000_000
 
 
 def _split_t_junctions(scene: Scene, extent: float, where: object) -> Scene:
-    """Split triangles whose edges pass through another vertex (to 1e-7 of the extent)."""
+    """Split triangles whose edges pass through another vertex (to 1e-7 of the extent).
+
+    Each half keeps its parent's material and object; lightmap UVs of the new corner are
+    interpolated along the split edge.
+    """
     positions, triangles = merge_vertices(scene.positions, scene.triangles, extent * 1e-9)
-    material = scene.material_index
+    parent = np.arange(len(triangles))  # scene triangle of each current triangle
+    uv = scene.lightmap_uv
     total = 0
     for _ in range(32):
         edges, tri_edges = _edges(triangles)
@@ -182,14 +183,48 @@ def _split_t_junctions(scene: Scene, extent: float, where: object) -> Scene:
         triangles = np.concatenate(
             [triangles[keep], np.stack([a, v, c], 1), np.stack([v, b, c], 1)]
         )
-        material = np.concatenate([material[keep], material[todo], material[todo]])
+        parent = np.concatenate([parent[keep], parent[todo], parent[todo]])
+        if uv is not None:
+            uv = np.concatenate([uv[keep], *_split_uvs(uv[todo], k, positions, a, b, v)])
         total += len(todo)
     if total == 0:
         return scene
     log.warning(
         "%s: split %d faces at T-junctions (vertices inside other faces' edges)", where, total
     )
-    return replace(scene, positions=positions, triangles=triangles, material_index=material)
+    return replace(scene.select(parent), positions=positions, triangles=triangles, lightmap_uv=uv)
+
+
+def _split_uvs(
+    uv: np.ndarray,
+    k: np.ndarray,
+    positions: np.ndarray,
+    a: np.ndarray,
+    b: np.ndarray,
+    v: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Corner UVs of the halves (a, v, c) and (v, b, c) of triangles split on edge k.
+
+    Parameters
+    ----------
+    uv : (N, 3, 2) float
+        Corner UVs of the split triangles, in their corner order.
+    k : (N,) int
+        The split edge runs from corner ``k`` (``a``) to corner ``k + 1`` (``b``).
+    positions : (V, 3) float [m]
+    a, b, v : (N,) int
+        Vertex indices of the edge ends and of the vertex on the edge.
+
+    Returns
+    -------
+    two (N, 3, 2) float64
+    """
+    rows = np.arange(len(uv))
+    ua, ub, uc = uv[rows, k], uv[rows, (k + 1) % 3], uv[rows, (k + 2) % 3]
+    edge = positions[b] - positions[a]
+    t = np.einsum("ij,ij->i", positions[v] - positions[a], edge) / np.einsum("ij,ij->i", edge, edge)
+    uv_v = ua + t[:, None] * (ub - ua)
+    return np.stack([ua, uv_v, uc], 1), np.stack([uv_v, ub, uc], 1)
 
 
 def _same_surface_only(

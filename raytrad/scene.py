@@ -38,8 +38,17 @@ class Scene:
         Emitted exitance per material and channel [W m-2].
     material_double_sided : (M,) bool
         True where a surface receives and shoots on both sides.
+    object_index : (T,) int64
+        Index into ``object_names`` for each triangle: the mesh (glTF node, OBJ object,
+        TOML ``[[mesh]]``) it belongs to, for per-mesh lightmaps.
+    object_names : tuple of str
+        One unique name per object.
     source : Path or None
         The file the scene came from, used in error messages.
+    lightmap_uv : (T, 3, 2) float64 or None
+        The model's lightmap UVs [1] per triangle corner, normalised with ``v`` growing
+        downwards (glTF convention); NaN rows for faces the UV set does not cover. None
+        when no UV set was read.
     """
 
     positions: np.ndarray
@@ -49,7 +58,10 @@ class Scene:
     material_reflectance: np.ndarray
     material_emitted_exitance: np.ndarray
     material_double_sided: np.ndarray
+    object_index: np.ndarray
+    object_names: tuple[str, ...]
     source: Path | None = field(default=None)
+    lightmap_uv: np.ndarray | None = field(default=None)
 
     @property
     def triangle_count(self) -> int:
@@ -73,6 +85,26 @@ class Scene:
     def triangle_vertices(self) -> np.ndarray:
         """(T, 3, 3) float64 corner positions [m]."""
         return np.asarray(self.positions[self.triangles])
+
+    def select(self, rows: np.ndarray) -> Scene:
+        """The scene with only the triangles ``rows`` ((T,) bool mask or (N,) indices)."""
+        return replace(
+            self,
+            triangles=self.triangles[rows],
+            material_index=self.material_index[rows],
+            object_index=self.object_index[rows],
+            lightmap_uv=None if self.lightmap_uv is None else self.lightmap_uv[rows],
+        )
+
+    def flipped(self, flip: np.ndarray) -> Scene:
+        """The scene with the winding of the triangles where ``flip`` ((T,) bool) reversed."""
+        triangles = self.triangles.copy()
+        triangles[flip] = triangles[flip][:, ::-1]
+        uv = self.lightmap_uv
+        if uv is not None:
+            uv = uv.copy()
+            uv[flip] = uv[flip][:, ::-1]
+        return replace(self, triangles=triangles, lightmap_uv=uv)
 
     def scaled(self, factor: float) -> Scene:
         """The same scene with positions multiplied by ``factor`` > 0 (unit conversion)."""
@@ -114,8 +146,14 @@ def make_scene(
     material_emitted_exitance: np.ndarray,
     material_double_sided: np.ndarray | None = None,
     source: str | Path | None = None,
+    object_index: np.ndarray | None = None,
+    object_names: tuple[str, ...] | list[str] | None = None,
+    lightmap_uv: np.ndarray | None = None,
 ) -> Scene:
     """Build a validated :class:`Scene` from arrays (see :class:`Scene` for shapes and units).
+
+    Without ``object_index`` every triangle belongs to one object, named after ``source``'s
+    file stem (or "scene").
 
     Raises
     ------
@@ -126,6 +164,9 @@ def make_scene(
     m = len(names)
     if material_double_sided is None:
         material_double_sided = np.zeros(m, dtype=bool)
+    if object_index is None:
+        object_index = np.zeros(len(np.asarray(material_index).reshape(-1)), dtype=np.int64)
+        object_names = [Path(source).stem if source is not None else "scene"]
     try:
         scene = _scene_from_arrays(
             positions,
@@ -136,6 +177,14 @@ def make_scene(
             material_emitted_exitance,
             material_double_sided,
             source,
+        )
+        scene = replace(
+            scene,
+            object_index=np.asarray(object_index, dtype=np.int64).reshape(-1),
+            object_names=tuple(str(n) for n in object_names or ()),
+            lightmap_uv=None
+            if lightmap_uv is None
+            else np.asarray(lightmap_uv, dtype=np.float64).reshape(-1, 3, 2),
         )
     except ValueError as exc:
         raise SceneError(source, f"malformed scene arrays ({exc})") from exc
@@ -163,6 +212,8 @@ def _scene_from_arrays(
             m, 3
         ),
         material_double_sided=np.asarray(material_double_sided, dtype=bool).reshape(m),
+        object_index=np.zeros(0, dtype=np.int64),
+        object_names=(),
         source=None if source is None else Path(source),
     )
 
@@ -200,6 +251,7 @@ def validate_scene(scene: Scene) -> Scene:
     nm = len(scene.material_names)
     if scene.material_index.min() < 0 or scene.material_index.max() >= nm:
         raise SceneError(src, "a face refers to a material that does not exist")
+    _check_objects(scene)
     for i, name in enumerate(scene.material_names):
         rho = scene.material_reflectance[i]
         if not np.isfinite(rho).all() or rho.min() < 0.0 or rho.max() > 1.0:
@@ -221,11 +273,26 @@ def validate_scene(scene: Scene) -> Scene:
         raise SceneError(src, "every face has zero area")
     if degenerate.any():
         log.warning("%s: dropped %d zero-area triangles", src or "<scene>", int(degenerate.sum()))
-        keep = ~degenerate
-        scene = replace(
-            scene, triangles=scene.triangles[keep], material_index=scene.material_index[keep]
-        )
+        scene = scene.select(~degenerate)
     return scene
+
+
+def _check_objects(scene: Scene) -> None:
+    """SceneError unless object indices and lightmap UVs have one entry per triangle."""
+    src, count = scene.source, scene.triangle_count
+    if scene.object_index.shape != (count,):
+        raise SceneError(src, "object_index must have one entry per triangle")
+    no = len(scene.object_names)
+    if scene.object_index.min() < 0 or scene.object_index.max() >= no:
+        raise SceneError(src, "a face refers to an object that does not exist")
+    if len(set(scene.object_names)) != no:
+        raise SceneError(src, "object names must be unique")
+    uv = scene.lightmap_uv
+    if uv is not None:
+        if uv.shape != (count, 3, 2):
+            raise SceneError(src, f"lightmap UVs must be ({count}, 3, 2), not {uv.shape}")
+        if np.isinf(uv).any():
+            raise SceneError(src, "the lightmap UV set has infinite coordinates")
 
 
 def has_emission(scene: Scene) -> bool:

@@ -17,6 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
+from raytrad.camera import Camera, NamedCamera
 from raytrad.errors import SettingsError
 from raytrad.io.atomic import atomic_write
 from raytrad.io.gltf import TRIANGLES, GltfBuffers, glb_container
@@ -95,6 +96,7 @@ def _quad_scene(
     facing: np.ndarray,
     quad_material: Sequence[str],
     materials: dict[str, tuple[tuple[float, ...], tuple[float, ...], bool]],
+    quad_object: Sequence[str] | None = None,
 ) -> Scene:
     """A scene of quads (two triangles each, four own vertices each).
 
@@ -108,8 +110,12 @@ def _quad_scene(
         Material name of each quad.
     materials : dict
         name -> (reflectance (3,) [1], emitted exitance (3,) [W m-2], double-sided).
+    quad_object : (Q,) sequence of str or None
+        The object (mesh) each quad belongs to; None: one object, "scene".
     """
     corners = _oriented(corners, facing)
+    objects = list(dict.fromkeys(quad_object or ["scene"]))
+    owner = np.array([objects.index(o) for o in quad_object or ["scene"] * len(corners)])
     q = corners.shape[0]
     names = list(materials)
     triangles = 4 * np.arange(q)[:, None, None] + np.array([[0, 1, 2], [0, 2, 3]])
@@ -122,6 +128,8 @@ def _quad_scene(
         material_reflectance=np.array([materials[n][0] for n in names]),
         material_emitted_exitance=np.array([materials[n][1] for n in names]),
         material_double_sided=np.array([materials[n][2] for n in names], dtype=bool),
+        object_index=np.repeat(owner, 2),
+        object_names=objects,
     )
 
 
@@ -174,7 +182,13 @@ def cornell_box() -> Scene:
     corners = np.concatenate([room, short_corners, tall_corners]) * MM
     facing = np.concatenate([room_facing, short_facing, tall_facing])
     quad_material = ["white", "white", "white", "green", "red", "light"] + ["white"] * 10
-    return _quad_scene(corners, facing, quad_material, CORNELL_MATERIALS)
+    quad_object = ["floor", "ceiling", "back-wall", "right-wall", "left-wall", "light"]
+    quad_object += ["short-block"] * 5 + ["tall-block"] * 5
+    return _quad_scene(corners, facing, quad_material, CORNELL_MATERIALS, quad_object)
+
+
+CORNELL_CAMERA = Camera((0.278, 0.273, -0.800), (0.278, 0.273, 0.0), (0.0, 1.0, 0.0), 39.3)
+"""The Cornell box camera of REFERENCE.md [m, degrees]."""
 
 
 def furnace_box(
@@ -244,7 +258,8 @@ def shadow_scene() -> Scene:
         ]
     )
     facing = np.array([_UP, _DOWN, _UP])
-    return _quad_scene(corners, facing, ["floor", "light", "occluder"], SHADOW_MATERIALS)
+    names = ["floor", "light", "occluder"]
+    return _quad_scene(corners, facing, names, SHADOW_MATERIALS, names)
 
 
 BUILTIN_SCENES: dict[str, Callable[[], Scene]] = {
@@ -342,13 +357,17 @@ def _gltf_material(scene: Scene, i: int, name: str) -> dict[str, object]:
     return material
 
 
-def write_glb(scene: Scene, glb_path: str | os.PathLike[str]) -> None:
-    """Write a scene as binary glTF 2.0 (atomically), one mesh and node per material.
+def write_glb(
+    scene: Scene, glb_path: str | os.PathLike[str], cameras: Sequence[NamedCamera] = ()
+) -> None:
+    """Write a scene as binary glTF 2.0 (atomically): one node and mesh per object, one
+    primitive per material, and one node per camera.
 
     Unlike OBJ, glTF keeps double-sidedness. Positions are stored as float32 [m];
     reflectance as ``baseColorFactor``; emitted exitance E [W m-2] as the radiance E / pi
     (``emissiveFactor`` times ``KHR_materials_emissive_strength``), which
-    :func:`raytrad.io.loaders.load_scene` multiplies back by pi.
+    :func:`raytrad.io.loaders.load_scene` multiplies back by pi. The scene's
+    ``lightmap_uv`` (if any) is stored as ``TEXCOORD_1``, with a vertex per corner.
 
     Parameters
     ----------
@@ -356,37 +375,90 @@ def write_glb(scene: Scene, glb_path: str | os.PathLike[str]) -> None:
         The scene to write.
     glb_path : path-like
         The ``.glb`` file.
+    cameras : sequence of NamedCamera
+        Perspective cameras, stored as nodes looking along their local -Z.
     """
     names = [n or f"material_{i}" for i, n in enumerate(scene.material_names)]
     gltf = GltfBuffers()
     meshes: list[dict[str, object]] = []
-    for i, name in enumerate(names):
-        triangles = scene.triangles[scene.material_index == i]
-        if len(triangles) == 0:
-            continue
-        used, local = np.unique(triangles.ravel(), return_inverse=True)
-        positions = scene.positions[used].astype("<f4")
-        primitive = {
-            "attributes": {"POSITION": gltf.add(positions, "VEC3")},
-            "indices": gltf.add(local.astype("<u4"), "SCALAR", indices=True),
-            "material": i,
-            "mode": TRIANGLES,
-        }
-        meshes.append({"name": name, "primitives": [primitive]})
+    for k, object_name in enumerate(scene.object_names):
+        primitives = [
+            _glb_primitive(gltf, scene, (scene.object_index == k) & (scene.material_index == i), i)
+            for i in range(len(names))
+        ]
+        primitives = [p for p in primitives if p is not None]
+        if primitives:
+            meshes.append({"name": object_name, "primitives": primitives})
     materials = [_gltf_material(scene, i, n) for i, n in enumerate(names)]
     binary = b"".join(gltf.blobs)
+    nodes: list[dict[str, object]] = [{"name": m["name"], "mesh": k} for k, m in enumerate(meshes)]
+    nodes += [_camera_node(named, k) for k, named in enumerate(cameras)]
     header: dict[str, object] = {
         "asset": {"version": "2.0", "generator": "raytrad"},
         "scene": 0,
-        "scenes": [{"nodes": list(range(len(meshes)))}],
-        "nodes": [{"name": m["name"], "mesh": k} for k, m in enumerate(meshes)],
+        "scenes": [{"nodes": list(range(len(nodes)))}],
+        "nodes": nodes,
         "meshes": meshes,
         "materials": materials,
         "accessors": gltf.accessors,
         "bufferViews": gltf.views,
         "buffers": [{"byteLength": len(binary)}],
     }
+    if cameras:
+        header["cameras"] = [
+            {"type": "perspective", "perspective": _perspective(named)} for named in cameras
+        ]
     if any("extensions" in m for m in materials):
         header["extensionsUsed"] = ["KHR_materials_emissive_strength"]
     with atomic_write(glb_path, "wb") as f:
         f.write(glb_container(json.dumps(header).encode("utf-8"), binary))
+
+
+def _glb_primitive(
+    gltf: GltfBuffers, scene: Scene, selected: np.ndarray, material: int
+) -> dict[str, object] | None:
+    """The primitive of the ``selected`` (T,) triangles, or None when there are none."""
+    triangles = scene.triangles[selected]
+    if len(triangles) == 0:
+        return None
+    attributes: dict[str, int] = {}
+    if scene.lightmap_uv is None:
+        used, local = np.unique(triangles.ravel(), return_inverse=True)
+        positions = scene.positions[used]
+    else:  # a vertex per corner: UVs are per corner
+        positions = scene.positions[triangles].reshape(-1, 3)
+        local = np.arange(positions.shape[0])
+        uv = scene.lightmap_uv[selected].reshape(-1, 2)
+        attributes["TEXCOORD_1"] = gltf.add(uv.astype("<f4"), "VEC2")
+    attributes["POSITION"] = gltf.add(positions.astype("<f4"), "VEC3")
+    return {
+        "attributes": attributes,
+        "indices": gltf.add(local.astype("<u4"), "SCALAR", indices=True),
+        "material": material,
+        "mode": TRIANGLES,
+    }
+
+
+def _camera_node(named: NamedCamera, index: int) -> dict[str, object]:
+    """A node placing camera ``index``: its local -Z is the view direction, +Y up."""
+    right, up, forward = named.camera.basis()
+    return {
+        "name": named.name,
+        "camera": index,
+        "translation": [float(v) for v in named.camera.position],
+        "rotation": _quaternion(np.column_stack([right, up, -forward])),
+    }
+
+
+def _perspective(named: NamedCamera) -> dict[str, float]:
+    view = {"yfov": math.radians(named.camera.vertical_fov_deg), "znear": 0.01}
+    if named.aspect_ratio is not None:
+        view["aspectRatio"] = named.aspect_ratio
+    return view
+
+
+def _quaternion(rotation: np.ndarray) -> list[float]:
+    """Unit quaternion [x, y, z, w] of a (3, 3) rotation matrix (glTF's order)."""
+    from scipy.spatial.transform import Rotation
+
+    return [float(q) for q in Rotation.from_matrix(rotation).as_quat()]

@@ -13,9 +13,10 @@ import pytest
 from raytrad import api
 from raytrad.camera import Camera
 from raytrad.cli import main
-from raytrad.image import framing_camera, render_radiance, twin_triangles
+from raytrad.image import automatic_camera, framing_camera, render_radiance, twin_triangles
 from raytrad.io.exr import read_image
-from raytrad.mesh import MeshSettings
+from raytrad.mesh import MeshSettings, RadiosityMesh
+from raytrad.scene import Scene
 from raytrad.scenes import cornell_box, furnace_box
 
 REPOSITORY = Path(__file__).resolve().parents[1]
@@ -144,3 +145,25 @@ def test_render_writes_image_lightmap_and_gltf_that_load_back(tmp_path: Path) ->
     png = data[start : start + view["byteLength"]]
     (tmp_path / "lightmap.png").write_bytes(png)
     assert read_image(tmp_path / "lightmap.png").shape[:2] == (128, 128)
+
+
+def _prepared_mesh(scene: Scene) -> RadiosityMesh:
+    prepared = api.prepare(scene, api.RenderSettings(mesh=MeshSettings(receivers=600)))
+    prepared.close()
+    return prepared.mesh
+
+
+def test_automatic_camera_keeps_the_front_view_of_an_open_box() -> None:
+    mesh = _prepared_mesh(cornell_box())
+    camera = automatic_camera(mesh)
+    assert camera == framing_camera(mesh.positions)
+
+
+def test_automatic_camera_goes_inside_a_closed_room() -> None:
+    # from outside, a closed room shows only the black backs of its walls
+    mesh = _prepared_mesh(furnace_box(0.5, 1.0))
+    camera = automatic_camera(mesh)
+    lo, hi = mesh.positions.min(axis=0), mesh.positions.max(axis=0)
+    assert (np.asarray(camera.position) > lo).all() and (np.asarray(camera.position) < hi).all()
+    image = render_radiance(mesh, np.ones((mesh.receiver_count, 3)), camera, 32, 24, 1)
+    assert (image > 0).all()  # every pixel sees the lit inside of a wall

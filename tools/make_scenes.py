@@ -1,8 +1,11 @@
 """Write the bundled scene files under ``scenes/`` from the builders in :mod:`raytrad.scenes`.
 
 Writes ``cornell-box.obj``/``.mtl``, ``furnace.obj``/``.mtl`` (reflectance 0.5, emitted
-exitance 1 W m-2) and ``shadow.glb`` (glTF, so its double-sided occluder stays
-double-sided). Run from the repository root: ``python tools/make_scenes.py``.
+exitance 1 W m-2), ``shadow.glb`` (glTF, so its double-sided occluder stays
+double-sided) and ``cornell-box-uv.glb``: the Cornell box as a game asset would come, one
+node per object, authored lightmap UVs in ``TEXCOORD_1`` (an xatlas layout for a 256 x 256
+lightmap) and two cameras, ``front`` (the Cornell box camera) and ``corner`` (16:9).
+Run from the repository root: ``python tools/make_scenes.py``.
 """
 
 from __future__ import annotations
@@ -11,6 +14,7 @@ import argparse
 import logging
 import sys
 from pathlib import Path
+from typing import Any
 
 log = logging.getLogger("make_scenes")
 
@@ -32,8 +36,28 @@ def main(argv: list[str] | None = None) -> int:
     write_obj(cornell_box(), out / "cornell-box.obj")
     write_obj(furnace_box(reflectance=0.5, emitted_exitance=1.0), out / "furnace.obj")
     write_glb(shadow_scene(), out / "shadow.glb")
-    log.info("wrote cornell-box.obj/.mtl, furnace.obj/.mtl and shadow.glb to %s", out)
+    lightmapped, cameras = _lightmapped_cornell_box()
+    write_glb(lightmapped, out / "cornell-box-uv.glb", cameras)
+    log.info(
+        "wrote cornell-box.obj/.mtl, furnace.obj/.mtl, shadow.glb and cornell-box-uv.glb to %s",
+        out,
+    )
     return 0
+
+
+def _lightmapped_cornell_box() -> tuple[Any, list[Any]]:
+    """The Cornell box with authored lightmap UVs and two named cameras."""
+    import dataclasses
+
+    from raytrad.camera import Camera, NamedCamera
+    from raytrad.io.xatlas_adapter import generate_atlas
+    from raytrad.scenes import CORNELL_CAMERA, cornell_box
+
+    scene = cornell_box()
+    _, triangles, uv, _ = generate_atlas(scene.positions, scene.triangles, 256, padding=4)
+    scene = dataclasses.replace(scene, lightmap_uv=uv[triangles])
+    corner = Camera((0.5, 0.45, 0.05), (0.1, 0.1, 0.5), vertical_fov_deg=50.0)
+    return scene, [NamedCamera("front", CORNELL_CAMERA, 1.0), NamedCamera("corner", corner, 16 / 9)]
 
 
 if __name__ == "__main__":

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import json
 import struct
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -97,77 +98,100 @@ def glb_container(json_bytes: bytes, binary: bytes) -> bytes:
     )
 
 
-def write_baked_glb(
-    path: Path,
-    positions: np.ndarray,
-    normals: np.ndarray,
-    triangles: np.ndarray,
-    colour: np.ndarray,
-    exposure: float,
-    lightmap_uv: np.ndarray | None = None,
-    lightmap_png: bytes | None = None,
-    extras: dict[str, Any] | None = None,
-) -> None:
-    """Write the baked model as one ``.glb`` (atomically).
+@dataclass(frozen=True, eq=False)
+class BakedPart:
+    """One mesh of the baked model: a glTF node with one primitive.
 
-    Parameters
+    Attributes
     ----------
-    path : Path
+    name : str
     positions : (V, 3) float [m]
     normals : (V, 3) float, unit
     triangles : (T, 3) int, counter-clockwise from the lit side
     colour : (V, 3) float
-        Linear display colour in [0, 1] (radiance times ``exposure``).
-    exposure : float
-        Multiplier from radiance [W sr-1 m-2] to ``colour`` (recorded in extras).
+        Linear display colour in [0, 1] (radiance times the exposure).
     lightmap_uv : (V, 2) float or None
         Lightmap coordinates in [0, 1] (glTF convention: v down).
     lightmap_png : bytes or None
-        The lightmap image; requires ``lightmap_uv``.
+        This part's lightmap image; parts may share one (the same bytes object is stored
+        once). Requires ``lightmap_uv``.
+    """
+
+    name: str
+    positions: np.ndarray
+    normals: np.ndarray
+    triangles: np.ndarray
+    colour: np.ndarray
+    lightmap_uv: np.ndarray | None = None
+    lightmap_png: bytes | None = None
+
+
+def write_baked_glb(
+    path: Path,
+    parts: list[BakedPart],
+    exposure: float,
+    extras: dict[str, Any] | None = None,
+) -> None:
+    """Write the baked model as one ``.glb`` (atomically), one node per part.
+
+    Parameters
+    ----------
+    path : Path
+    parts : list of BakedPart
+    exposure : float
+        Multiplier from radiance [W sr-1 m-2] to the parts' ``colour`` (recorded in extras).
     extras : dict or None
         More facts for ``extras.raytrad`` (units, settings, version).
     """
     gltf = GltfBuffers()
-    attributes = {
-        "POSITION": gltf.add(np.asarray(positions, dtype="<f4"), "VEC3"),
-        "NORMAL": gltf.add(np.asarray(normals, dtype="<f4"), "VEC3"),
-        "COLOR_0": gltf.add(np.clip(np.asarray(colour, dtype="<f4"), 0.0, 1.0), "VEC3"),
-    }
-    header: dict[str, Any] = {
-        "asset": {"version": "2.0", "generator": "raytrad"},
-        "extensionsUsed": ["KHR_materials_unlit"],
-    }
-    material: dict[str, Any] = {
-        "name": "baked",
-        "pbrMetallicRoughness": {"baseColorFactor": [1, 1, 1, 1], "metallicFactor": 0.0},
-        "extensions": {"KHR_materials_unlit": {}},
-    }
-    if lightmap_png is not None and lightmap_uv is not None:
-        attributes["TEXCOORD_1"] = gltf.add(np.asarray(lightmap_uv, dtype="<f4"), "VEC2")
-        header["images"] = [{"bufferView": gltf.add_image(lightmap_png), "mimeType": "image/png"}]
-        header["samplers"] = [{"magFilter": 9729, "minFilter": 9729}]
-        header["textures"] = [{"source": 0, "sampler": 0}]
-        material = {
-            "name": "baked-lightmap",
-            "pbrMetallicRoughness": {"baseColorFactor": [0, 0, 0, 1], "metallicFactor": 0.0},
-            "emissiveFactor": [1, 1, 1],
-            "emissiveTexture": {"index": 0, "texCoord": 1},
+    header: dict[str, Any] = {"asset": {"version": "2.0", "generator": "raytrad"}}
+    materials: list[dict[str, Any]] = []
+    textures: dict[int, int] = {}  # id(png) -> texture index
+    images: list[dict[str, Any]] = []
+    meshes: list[dict[str, Any]] = []
+    unlit: int | None = None  # the shared unlit material's index, once a part needs it
+    for part in parts:
+        attributes = {
+            "POSITION": gltf.add(np.asarray(part.positions, dtype="<f4"), "VEC3"),
+            "NORMAL": gltf.add(np.asarray(part.normals, dtype="<f4"), "VEC3"),
+            "COLOR_0": gltf.add(np.clip(np.asarray(part.colour, dtype="<f4"), 0.0, 1.0), "VEC3"),
         }
-        header.pop("extensionsUsed")
-    primitive = {
-        "attributes": attributes,
-        "indices": gltf.add(np.asarray(triangles, dtype="<u4").reshape(-1), "SCALAR", True),
-        "material": 0,
-        "mode": TRIANGLES,
-    }
+        if part.lightmap_png is not None and part.lightmap_uv is not None:
+            attributes["TEXCOORD_1"] = gltf.add(np.asarray(part.lightmap_uv, dtype="<f4"), "VEC2")
+            if id(part.lightmap_png) not in textures:
+                textures[id(part.lightmap_png)] = len(images)
+                images.append(
+                    {"bufferView": gltf.add_image(part.lightmap_png), "mimeType": "image/png"}
+                )
+            materials.append(_lightmap_material(part.name, textures[id(part.lightmap_png)]))
+            material = len(materials) - 1
+        else:
+            if unlit is None:
+                unlit = len(materials)
+                materials.append(_UNLIT_MATERIAL)
+            material = unlit
+        indices = np.asarray(part.triangles, dtype="<u4").reshape(-1)
+        primitive = {
+            "attributes": attributes,
+            "indices": gltf.add(indices, "SCALAR", True),
+            "material": material,
+            "mode": TRIANGLES,
+        }
+        meshes.append({"name": part.name, "primitives": [primitive]})
+    if images:
+        header["images"] = images
+        header["samplers"] = [{"magFilter": 9729, "minFilter": 9729}]
+        header["textures"] = [{"source": i, "sampler": 0} for i in range(len(images))]
+    if unlit is not None:
+        header["extensionsUsed"] = ["KHR_materials_unlit"]
     binary = gltf.binary()
     header.update(
         {
             "scene": 0,
-            "scenes": [{"nodes": [0]}],
-            "nodes": [{"name": "baked", "mesh": 0}],
-            "meshes": [{"name": "baked", "primitives": [primitive]}],
-            "materials": [material],
+            "scenes": [{"nodes": list(range(len(parts)))}],
+            "nodes": [{"name": part.name, "mesh": i} for i, part in enumerate(parts)],
+            "meshes": meshes,
+            "materials": materials,
             "accessors": gltf.accessors,
             "bufferViews": gltf.views,
             "buffers": [{"byteLength": len(binary)}],
@@ -176,3 +200,21 @@ def write_baked_glb(
     )
     with atomic_write(path) as handle:
         handle.write(glb_container(json.dumps(header).encode("utf-8"), binary))
+
+
+_UNLIT_MATERIAL: dict[str, Any] = {
+    "name": "baked",
+    "pbrMetallicRoughness": {"baseColorFactor": [1, 1, 1, 1], "metallicFactor": 0.0},
+    "extensions": {"KHR_materials_unlit": {}},
+}
+"""Shows ``COLOR_0`` as is, in viewers that know the extension."""
+
+
+def _lightmap_material(name: str, texture: int) -> dict[str, Any]:
+    """A material showing lightmap ``texture`` (on ``TEXCOORD_1``) as emission."""
+    return {
+        "name": f"{name}-lightmap",
+        "pbrMetallicRoughness": {"baseColorFactor": [0, 0, 0, 1], "metallicFactor": 0.0},
+        "emissiveFactor": [1, 1, 1],
+        "emissiveTexture": {"index": texture, "texCoord": 1},
+    }

@@ -51,21 +51,39 @@ _DEFAULT_OBJ_MATERIAL = _Material("default", (DEFAULT_REFLECTANCE,) * 3)
 
 @dataclass
 class _Collected:
-    """Triangle groups gathered from one file, each with a material (deduplicated by name)."""
+    """Triangle groups gathered from one file, each with a material (deduplicated by name).
+
+    ``uv_set`` is the texture-coordinate set asked for as lightmap UVs (None: none);
+    loaders pass each group's per-vertex UVs of that set (v down), or nothing when the
+    group has none.
+    """
 
     path: Path
+    uv_set: int | None = None
     positions: list[np.ndarray] = field(default_factory=list)
     triangles: list[np.ndarray] = field(default_factory=list)
     material_index: list[np.ndarray] = field(default_factory=list)
+    object_index: list[np.ndarray] = field(default_factory=list)
+    uv: list[np.ndarray] = field(default_factory=list)
     materials: dict[str, tuple[int, _Material]] = field(default_factory=dict)
+    objects: dict[str, int] = field(default_factory=dict)
     warned: set[str] = field(default_factory=set)
     vertex_count: int = 0
 
-    def add(self, positions: np.ndarray, triangles: np.ndarray, material: _Material) -> None:
+    def add(
+        self,
+        positions: np.ndarray,
+        triangles: np.ndarray,
+        material: _Material,
+        object_name: str | None = None,
+        uv: np.ndarray | None = None,
+    ) -> None:
         """Append (n, 3) positions [file units] and (t, 3) local triangles of one material.
 
         Materials are shared by name; a different material with a name already taken
-        (say a file's own "default") is renamed ``<name>_<k>``.
+        (say a file's own "default") is renamed ``<name>_<k>``. ``object_name`` names the
+        mesh the faces belong to (None: the file's stem); ``uv`` is (n, 2) lightmap UVs
+        [1] of the positions, v down.
         """
         base, k = material.name, 0
         while material.name in self.materials and self.materials[material.name][1] != material:
@@ -74,11 +92,17 @@ class _Collected:
         if material.name not in self.materials:
             self.materials[material.name] = (len(self.materials), material)
         index = self.materials[material.name][0]
+        object_name = self.path.stem if object_name is None else object_name
+        obj = self.objects.setdefault(object_name, len(self.objects))
         positions = np.asarray(positions, dtype=np.float64).reshape(-1, 3)
         triangles = np.asarray(triangles, dtype=np.int64).reshape(-1, 3)
+        if uv is None:
+            uv = np.full((len(positions), 2), np.nan)
         self.positions.append(positions)
         self.triangles.append(triangles + self.vertex_count)
         self.material_index.append(np.full(len(triangles), index, dtype=np.int64))
+        self.object_index.append(np.full(len(triangles), obj, dtype=np.int64))
+        self.uv.append(np.asarray(uv, dtype=np.float64).reshape(-1, 2))
         self.vertex_count += len(positions)
 
     def warn_once(self, key: str, message: str, *args: object) -> None:
@@ -92,15 +116,22 @@ class _Collected:
         if not self.triangles or sum(len(t) for t in self.triangles) == 0:
             raise SceneError(self.path, "the file contains no triangle faces")
         materials = [m for _, m in sorted(self.materials.values(), key=lambda im: im[0])]
+        triangles = np.concatenate(self.triangles)
+        lightmap_uv = None
+        if self.uv_set is not None:
+            lightmap_uv = np.concatenate(self.uv)[triangles]
         return make_scene(
             positions=np.concatenate(self.positions) * scale,
-            triangles=np.concatenate(self.triangles),
+            triangles=triangles,
             material_index=np.concatenate(self.material_index),
             material_names=[m.name for m in materials],
             material_reflectance=np.array([m.reflectance for m in materials]),
             material_emitted_exitance=np.array([m.emitted_exitance for m in materials]),
             material_double_sided=np.array([m.double_sided for m in materials], dtype=bool),
             source=self.path,
+            object_index=np.concatenate(self.object_index),
+            object_names=list(self.objects),
+            lightmap_uv=lightmap_uv,
         )
 
 
@@ -117,7 +148,9 @@ def checked_path(path: str | os.PathLike[str], scale: float) -> tuple[Path, floa
     return path, scale
 
 
-def load_scene(path: str | os.PathLike[str], scale: float = 1.0) -> Scene:
+def load_scene(
+    path: str | os.PathLike[str], scale: float = 1.0, uv_set: int | None = None
+) -> Scene:
     """Load a scene file, dispatching on its suffix through :data:`LOADERS`.
 
     Parameters
@@ -126,6 +159,10 @@ def load_scene(path: str | os.PathLike[str], scale: float = 1.0) -> Scene:
         An ``.obj`` (with its ``.mtl``), ``.gltf``, ``.glb`` or ``.ply`` file.
     scale : float
         Metres per file unit [m], for example 0.001 for a file in millimetres.
+    uv_set : int or None
+        Read this texture-coordinate set as the lightmap UVs (``Scene.lightmap_uv``): glTF
+        ``TEXCOORD_<n>``; OBJ ``vt`` and PLY ``s, t`` (or ``u, v``) are set 0. Faces
+        without it get NaN UVs. None reads no UVs.
 
     Returns
     -------
@@ -141,6 +178,8 @@ def load_scene(path: str | os.PathLike[str], scale: float = 1.0) -> Scene:
         If ``scale`` is not a finite positive number.
     """
     path, scale = checked_path(path, scale)
+    if uv_set is not None and uv_set < 0:
+        raise SettingsError(f"uv set must be >= 0, not {uv_set}")
     loader = LOADERS.get(path.suffix.lower())
     if loader is None:
         supported = ", ".join(sorted(LOADERS))
@@ -148,7 +187,7 @@ def load_scene(path: str | os.PathLike[str], scale: float = 1.0) -> Scene:
             path, f"unsupported file type {path.suffix or '(no suffix)'!r}; use one of {supported}"
         )
     try:
-        collected = loader(path)
+        collected = loader(path, uv_set)
     except OSError as exc:
         raise SceneError(path, f"cannot read the file: {exc.strerror or exc}") from exc
     scene = collected.to_scene(scale)
@@ -189,20 +228,43 @@ def _compact(vertices: np.ndarray, triangles: np.ndarray) -> tuple[np.ndarray, n
     positions : (n, 3) float64
     triangles : (t, 3) int64
     """
+    used, local = _used_vertices(triangles)
+    return np.asarray(vertices, dtype=np.float64)[used], local
+
+
+def _used_vertices(triangles: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(n,) indices of the vertices the triangles use, and (t, 3) triangles over them."""
     used, local = np.unique(np.asarray(triangles, dtype=np.int64).ravel(), return_inverse=True)
-    return np.asarray(vertices, dtype=np.float64)[used], local.reshape(-1, 3)
+    return used, local.reshape(-1, 3)
+
+
+def _top_down_uv(collected: _Collected, geometry: trimesh.Trimesh) -> np.ndarray | None:
+    """(n, 2) per-vertex UVs of a trimesh geometry with v down, or None without any.
+
+    trimesh stores UVs with v up (OBJ's convention; it flips glTF's), so v is flipped back.
+    """
+    if collected.uv_set is None:
+        return None
+    uv = getattr(geometry.visual, "uv", None)
+    if uv is None or len(uv) != len(geometry.vertices):
+        return None
+    uv = np.asarray(uv, dtype=np.float64).reshape(-1, 2)
+    return np.column_stack([uv[:, 0], 1.0 - uv[:, 1]])
 
 
 def _add_trimesh_scene(
     collected: _Collected,
     tm_scene: trimesh.Scene,
     material_of: Callable[[trimesh.Trimesh], _Material],
+    objects_by_node: bool = False,
 ) -> None:
     """Add every triangle geometry of a trimesh scene, placed by its node transform.
 
     Geometry without faces (points, paths) is skipped. A transform that mirrors
     (negative determinant) would turn front faces into back faces, so their winding is
-    reversed to keep the front side facing where the mirrored surface faces.
+    reversed to keep the front side facing where the mirrored surface faces. With
+    ``objects_by_node`` each scene-graph node is an object (a glTF node); else the file is
+    one object.
     """
     import trimesh
 
@@ -216,13 +278,21 @@ def _add_trimesh_scene(
                 collected.path,
                 f"vertices must have 3 coordinates, found {geometry.vertices.shape[-1]}",
             )
-        vertices, local = _compact(geometry.vertices, geometry.faces)
+        used, local = _used_vertices(geometry.faces)
+        vertices = np.asarray(geometry.vertices, dtype=np.float64)[used]
+        uv = _top_down_uv(collected, geometry)
         transform = np.asarray(matrix, dtype=np.float64)
         with np.errstate(invalid="ignore", over="ignore"):  # non-finite input is reported later
             positions = vertices @ transform[:3, :3].T + transform[:3, 3]
         if np.linalg.det(transform[:3, :3]) < 0.0:
             local = local[:, ::-1]
-        collected.add(positions, local, material_of(geometry))
+        collected.add(
+            positions,
+            local,
+            material_of(geometry),
+            str(node) if objects_by_node else None,
+            None if uv is None else uv[used],
+        )
 
 
 # --------------------------------------------------------------------------- OBJ + MTL
@@ -232,8 +302,12 @@ _SCALAR_COLOUR = re.compile(
 )
 
 
-def _load_obj(path: Path) -> _Collected:
-    """OBJ geometry through trimesh; ``Kd`` (reflectance) and ``Ke`` [W m-2] from the MTL."""
+def _load_obj(path: Path, uv_set: int | None = None) -> _Collected:
+    """OBJ geometry through trimesh; ``Kd`` (reflectance) and ``Ke`` [W m-2] from the MTL.
+
+    ``vt`` coordinates are UV set 0. trimesh keeps them per corner only when it may split
+    vertices by (v, vt) pair (``maintain_order=False``), so that is how UVs are read.
+    """
     import trimesh
 
     data = path.read_bytes()
@@ -242,7 +316,7 @@ def _load_obj(path: Path) -> _Collected:
     # Undecodable bytes (a Latin-1 comment, say) become U+FFFD instead of failing in trimesh.
     text = data.decode("utf-8", errors="replace").encode("utf-8")
     resolver = _mtl_resolver(path.parent)
-    collected = _Collected(path)
+    collected = _Collected(path, uv_set)
     try:
         tm_scene = trimesh.load_scene(  # = trimesh.load(..., force="scene")
             io.BytesIO(text),
@@ -250,7 +324,7 @@ def _load_obj(path: Path) -> _Collected:
             resolver=resolver,
             process=False,
             group_material=True,
-            maintain_order=True,
+            maintain_order=uv_set != 0,
         )
     except Exception as exc:  # trimesh raises many types for malformed input
         raise SceneError(path, f"cannot parse as OBJ: {_reason(exc)}") from exc
@@ -327,27 +401,29 @@ _MATERIAL_TOKEN = re.compile(r"^__raytrad_material_(\d+)__$")
 _GLTF_DEFAULT_MATERIAL = _Material("default", (1.0, 1.0, 1.0))
 
 
-def _load_gltf(path: Path) -> _Collected:
+def _load_gltf(path: Path, uv_set: int | None = None) -> _Collected:
     """A ``.gltf`` file (JSON, buffers beside it or as data URIs)."""
     try:
         document = json.loads(path.read_bytes().decode("utf-8-sig"))
     except (UnicodeDecodeError, json.JSONDecodeError) as exc:
         raise SceneError(path, f"cannot parse as glTF: {_reason(exc)}") from None
-    collected = _Collected(path)
+    collected = _Collected(path, uv_set)
     materials = _gltf_materials(collected, document)
+    _select_texcoord(collected, document)
     payload = json.dumps(document).encode("utf-8")
     return _load_gltf_payload(collected, payload, "gltf", materials)
 
 
-def _load_glb(path: Path) -> _Collected:
+def _load_glb(path: Path, uv_set: int | None = None) -> _Collected:
     """A binary ``.glb`` file: its JSON chunk is rewritten, the BIN chunk kept as is."""
     json_bytes, rest = _split_glb(path, path.read_bytes())
     try:
         document = json.loads(json_bytes.decode("utf-8"))
     except (UnicodeDecodeError, json.JSONDecodeError) as exc:
         raise SceneError(path, f"cannot parse as GLB: bad JSON chunk: {_reason(exc)}") from None
-    collected = _Collected(path)
+    collected = _Collected(path, uv_set)
     materials = _gltf_materials(collected, document)
+    _select_texcoord(collected, document)
     payload = _join_glb(json.dumps(document).encode("utf-8"), rest)
     return _load_gltf_payload(collected, payload, "glb", materials)
 
@@ -409,6 +485,37 @@ def _gltf_materials(collected: _Collected, document: Any) -> list[_Material]:
     for key in ("textures", "images", "samplers"):
         document.pop(key, None)
     return materials
+
+
+def _select_texcoord(collected: _Collected, document: dict[str, Any]) -> None:
+    """Make ``TEXCOORD_<uv_set>`` the set trimesh reads, ``TEXCOORD_0``, in every primitive.
+
+    trimesh reads only ``TEXCOORD_0``, and only for primitives with a material, so
+    primitives without one get a token past the file's materials (glTF's default
+    material, see :func:`_load_gltf_payload`). Without a ``uv_set`` nothing changes.
+    """
+    uv_set = collected.uv_set
+    if uv_set is None:
+        return
+    tokens = document.setdefault("materials", [])
+    default = len(tokens)
+    needs_default = False
+    for mesh in document.get("meshes", []) if isinstance(document.get("meshes"), list) else []:
+        primitives = mesh.get("primitives", []) if isinstance(mesh, dict) else []
+        for primitive in primitives if isinstance(primitives, list) else []:
+            attributes = primitive.get("attributes") if isinstance(primitive, dict) else None
+            if not isinstance(attributes, dict):
+                continue
+            accessor = attributes.pop(f"TEXCOORD_{uv_set}", None)
+            for name in [a for a in attributes if a.startswith("TEXCOORD_")]:
+                del attributes[name]
+            if accessor is not None:
+                attributes["TEXCOORD_0"] = accessor
+            if "material" not in primitive:
+                primitive["material"] = default
+                needs_default = True
+    if needs_default:
+        tokens.append({"name": f"__raytrad_material_{default}__"})
 
 
 def _gltf_material(collected: _Collected, index: int, spec: dict[str, Any]) -> _Material:
@@ -473,7 +580,7 @@ def _load_gltf_payload(
             return _GLTF_DEFAULT_MATERIAL
         return materials[int(match.group(1))]
 
-    _add_trimesh_scene(collected, tm_scene, material_of)
+    _add_trimesh_scene(collected, tm_scene, material_of, objects_by_node=True)
     return collected
 
 
@@ -484,11 +591,13 @@ _EMISSION_PROPERTIES = ("emitted_exitance_r", "emitted_exitance_g", "emitted_exi
 _COLOUR_PROPERTIES = ("red", "green", "blue")
 
 
-def _load_ply(path: Path) -> _Collected:
+def _load_ply(path: Path, uv_set: int | None = None) -> _Collected:
     """PLY polygons (fan-triangulated) with per-face materials.
 
     Face properties ``reflectance_r/g/b`` [1] and ``emitted_exitance_r/g/b`` [W m-2], else
     ``red/green/blue`` uchar colours decoded from sRGB, else one grey default material.
+    UV set 0 is the vertex properties ``s, t``, ``u, v`` or ``texture_u, texture_v`` (v up,
+    as MeshLab and Blender write them).
     """
     from trimesh.exchange.ply import load_ply
 
@@ -498,7 +607,8 @@ def _load_ply(path: Path) -> _Collected:
         positions = np.column_stack([raw["vertex"]["data"][a] for a in "xyz"])
     except Exception as exc:  # trimesh raises many types for malformed input
         raise SceneError(path, f"cannot parse as PLY: {_reason(exc)}") from exc
-    collected = _Collected(path)
+    collected = _Collected(path, uv_set)
+    uv = _ply_uv(raw["vertex"]["data"]) if uv_set == 0 else None
     face = raw.get("face") or {}
     if not face.get("length"):
         return collected
@@ -514,8 +624,20 @@ def _load_ply(path: Path) -> _Collected:
     for m, material in enumerate(materials):
         selected = triangles[triangle_material == m]
         if len(selected):
-            collected.add(*_compact(positions, selected), material)
+            used, local = _used_vertices(selected)
+            collected.add(positions[used], local, material, None, None if uv is None else uv[used])
     return collected
+
+
+def _ply_uv(vertex: Any) -> np.ndarray | None:
+    """(n, 2) vertex UVs with v down from PLY vertex data, or None without UV properties."""
+    names = set(getattr(getattr(vertex, "dtype", None), "names", None) or vertex)
+    for u, v in (("s", "t"), ("u", "v"), ("texture_u", "texture_v")):
+        if u in names and v in names:
+            return np.column_stack(
+                [np.asarray(vertex[u], dtype=np.float64), 1.0 - np.asarray(vertex[v], np.float64)]
+            )
+    return None
 
 
 def _ply_face_columns(data: Any) -> dict[str, np.ndarray]:
@@ -618,14 +740,14 @@ def _srgb_decode(encoded: np.ndarray) -> np.ndarray:
     return np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
 
 
-def _load_toml(path: Path) -> _Collected:
+def _load_toml(path: Path, uv_set: int | None = None) -> _Collected:
     """A TOML scene description: meshes, materials, camera (:mod:`raytrad.io.toml_scene`)."""
     from raytrad.io.toml_scene import collect_toml
 
-    return collect_toml(path)
+    return collect_toml(path, uv_set)
 
 
-LOADERS: dict[str, Callable[[Path], _Collected]] = {
+LOADERS: dict[str, Callable[[Path, int | None], _Collected]] = {
     ".obj": _load_obj,
     ".gltf": _load_gltf,
     ".glb": _load_glb,

@@ -43,7 +43,7 @@ log = logging.getLogger(__name__)
 TOP_KEYS = ("mesh", "materials", "camera", "output")
 """Keys allowed at the top level of a scene file."""
 
-MESH_KEYS = ("file", "transform", "translate", "rotate_deg", "scale", "materials")
+MESH_KEYS = ("file", "name", "transform", "translate", "rotate_deg", "scale", "materials")
 """Keys allowed in each ``[[mesh]]`` table."""
 
 REFLECTANCE_KEYS = ("reflectance", "reflectance_spectrum", "reflectance_named")
@@ -112,7 +112,9 @@ class SceneDescription:
     output: dict[str, float | int] = field(default_factory=dict)
 
 
-def load_scene_description(path: str | os.PathLike[str], scale: float = 1.0) -> SceneDescription:
+def load_scene_description(
+    path: str | os.PathLike[str], scale: float = 1.0, uv_set: int | None = None
+) -> SceneDescription:
     """Load a TOML scene file with its camera and output settings.
 
     Parameters
@@ -122,6 +124,9 @@ def load_scene_description(path: str | os.PathLike[str], scale: float = 1.0) -> 
     scale : float
         Multiplies every position, the camera's included [m per scene unit]; scene files
         are in metres, so normally 1.
+    uv_set : int or None
+        The texture-coordinate set of the mesh files to read as lightmap UVs (see
+        :func:`raytrad.io.loaders.load_scene`).
 
     Returns
     -------
@@ -137,7 +142,7 @@ def load_scene_description(path: str | os.PathLike[str], scale: float = 1.0) -> 
         If ``scale`` is not a finite positive number.
     """
     path, scale = checked_path(path, scale)
-    description = _describe(_parse(path), scale)
+    description = _describe(_parse(path, uv_set), scale, uv_set)
     log.info(
         "%s: %d triangles, %d materials, %s",
         path,
@@ -392,7 +397,8 @@ class _Part:
 
     ``positions`` (n, 3) float64 [m, before the load scale], ``triangles`` (t, 3) int64,
     ``area`` their total area [m2, before the load scale], and the resolved material
-    (its emitted exitance final unless ``emission`` spreads a power or flux).
+    (its emitted exitance final unless ``emission`` spreads a power or flux); the object
+    they belong to and (n, 2) lightmap UVs (NaN where the mesh file has none).
     """
 
     positions: np.ndarray
@@ -400,6 +406,8 @@ class _Part:
     area: float
     material: _Material
     emission: _Emission | None
+    object_name: str
+    uv: np.ndarray
 
 
 def _rotation(axis: int, degrees: float) -> np.ndarray:
@@ -445,7 +453,7 @@ def _parse_transform(key: _Key, table: dict[str, Any]) -> np.ndarray:
     return world_from_file
 
 
-def _load_mesh(key: _Key, table: dict[str, Any]) -> tuple[Path, Scene]:
+def _load_mesh(key: _Key, table: dict[str, Any], uv_set: int | None) -> tuple[Path, Scene]:
     """The mesh file of a ``[[mesh]]`` table, loaded; errors name both files."""
     where = key / "file"
     name = _string(where, _required(key, table, "file"))
@@ -455,7 +463,7 @@ def _load_mesh(key: _Key, table: dict[str, Any]) -> tuple[Path, Scene]:
     if not mesh_path.is_file():
         raise where.error(f"mesh file {str(mesh_path)!r} not found")
     try:
-        return mesh_path, load_scene(mesh_path)
+        return mesh_path, load_scene(mesh_path, uv_set=uv_set)
     except SceneError as exc:
         raise where.error(f"cannot load mesh file: {exc}") from None
 
@@ -475,9 +483,13 @@ def _overlay(material: _Material, override: _Override | None) -> tuple[_Material
 
 
 def _parse_mesh(
-    key: _Key, value: Any, shared: dict[str, _Override]
+    key: _Key, value: Any, shared: dict[str, _Override], uv_set: int | None, taken: set[str]
 ) -> tuple[list[_Part], set[str]]:
-    """The placed parts of one ``[[mesh]]`` and the material names its file has."""
+    """The placed parts of one ``[[mesh]]`` and the material names its file has.
+
+    The mesh is one object named by its ``name`` key (else the file's stem; ``_<k>``
+    appended when taken), or ``<name>/<object>`` for each object of a file with several.
+    """
     table = _table(key, value, MESH_KEYS)
     world_from_file = _parse_transform(key, table)
     overrides_key = key / "materials"
@@ -487,7 +499,8 @@ def _parse_mesh(
             overrides_key, table.get("materials", {}), _any_name(table.get("materials"))
         ).items()
     }
-    mesh_path, mesh = _load_mesh(key, table)
+    mesh_path, mesh = _load_mesh(key, table, uv_set)
+    object_names = _object_names(key, table, mesh_path, mesh, taken)
     names = set(mesh.material_names)
     for name in overrides:
         if name not in names:
@@ -500,11 +513,14 @@ def _parse_mesh(
     if np.linalg.det(world_from_file[:3, :3]) < 0.0:  # a mirror: keep the front side lit
         triangles = triangles[:, ::-1]
     areas, _ = triangle_areas_normals(positions[triangles])
+    uv = mesh.lightmap_uv
+    if uv is not None and np.linalg.det(world_from_file[:3, :3]) < 0.0:
+        uv = uv[:, ::-1]
     parts = []
-    for index, name in enumerate(mesh.material_names):
-        mine = mesh.material_index == index
-        if not mine.any():
-            continue
+    groups = np.unique(np.column_stack([mesh.material_index, mesh.object_index]), axis=0)
+    for index, obj in groups.tolist():
+        name = mesh.material_names[index]
+        mine = (mesh.material_index == index) & (mesh.object_index == obj)
         material = _Material(
             name,
             _triple(mesh.material_reflectance[index]),
@@ -517,11 +533,46 @@ def _parse_mesh(
             material, own = _overlay(material, override)
             if override.emission is not None:  # the mesh's emission replaces the shared one
                 pending = own
-        local_positions, local_triangles = _compact(positions, triangles[mine])
+        if uv is None:
+            local_positions, local_triangles = _compact(positions, triangles[mine])
+            local_uv = np.full((len(local_positions), 2), np.nan)
+        else:  # one vertex per corner keeps each corner's UV
+            corners = triangles[mine]
+            local_positions = positions[corners].reshape(-1, 3)
+            local_triangles = np.arange(corners.size).reshape(-1, 3)
+            local_uv = uv[mine].reshape(-1, 2)
         parts.append(
-            _Part(local_positions, local_triangles, float(areas[mine].sum()), material, pending)
+            _Part(
+                local_positions,
+                local_triangles,
+                float(areas[mine].sum()),
+                material,
+                pending,
+                object_names[obj],
+                local_uv,
+            )
         )
     return parts, names
+
+
+def _object_names(
+    key: _Key, table: dict[str, Any], mesh_path: Path, mesh: Scene, taken: set[str]
+) -> list[str]:
+    """Unique names of the objects of one ``[[mesh]]`` (see :func:`_parse_mesh`)."""
+    base = _string(key / "name", table["name"]) if "name" in table else mesh_path.stem
+    if "name" in table and base in taken:
+        raise (key / "name").error(f"another [[mesh]] is already named {base!r}")
+    name, k = base, 0
+    while name in taken:
+        k += 1
+        name = f"{base}_{k}"
+    if len(mesh.object_names) == 1:
+        names = [name]
+    else:
+        names = [f"{name}/{inner}" for inner in mesh.object_names]
+    taken.update(names)
+    taken.add(name)
+    return names
 
 
 def _any_name(value: Any) -> tuple[str, ...]:
@@ -587,7 +638,7 @@ def _read_toml(path: Path) -> dict[str, Any]:
         raise SceneError(path, f"cannot read the file: {exc.strerror or exc}") from exc
 
 
-def _parse(path: Path) -> _Parsed:
+def _parse(path: Path, uv_set: int | None = None) -> _Parsed:
     """Read and check a TOML scene file and load and place its meshes."""
     root = _Key(path)
     document = _table(root, _read_toml(path), TOP_KEYS)
@@ -603,8 +654,9 @@ def _parse(path: Path) -> _Parsed:
         raise (root / "mesh").error("expected one or more [[mesh]] tables")
     parts: list[_Part] = []
     found: set[str] = set()
+    taken: set[str] = set()
     for i, mesh in enumerate(meshes):
-        mesh_parts, names = _parse_mesh((root / "mesh").index(i), mesh, shared)
+        mesh_parts, names = _parse_mesh((root / "mesh").index(i), mesh, shared, uv_set, taken)
         parts.extend(mesh_parts)
         found |= names
     for name in shared:
@@ -617,7 +669,7 @@ def _parse(path: Path) -> _Parsed:
     return _Parsed(path, parts, camera, output)
 
 
-def _describe(parsed: _Parsed, scale: float) -> SceneDescription:
+def _describe(parsed: _Parsed, scale: float, uv_set: int | None = None) -> SceneDescription:
     """The scene at ``scale`` [m per scene unit], power and flux spread over scaled areas."""
     emitting_area: dict[_Emission, float] = {}
     for part in parsed.parts:
@@ -625,7 +677,7 @@ def _describe(parsed: _Parsed, scale: float) -> SceneDescription:
             sides = 2.0 if part.material.double_sided else 1.0
             area = part.area * scale * scale * sides
             emitting_area[part.emission] = emitting_area.get(part.emission, 0.0) + area
-    collected = _Collected(parsed.path)
+    collected = _Collected(parsed.path, uv_set)
     for part in parsed.parts:
         material, emission = part.material, part.emission
         if emission is not None:
@@ -639,7 +691,7 @@ def _describe(parsed: _Parsed, scale: float) -> SceneDescription:
                 emission.key, convert, amount, emitting_area[emission], emission.rgb
             )
             material = replace(material, emitted_exitance=_triple(exitance))
-        collected.add(part.positions, part.triangles, material)
+        collected.add(part.positions, part.triangles, material, part.object_name, part.uv)
     scene = collected.to_scene(scale)
     camera = parsed.camera
     if camera is not None and scale != 1.0:
@@ -663,12 +715,12 @@ class _TomlCollected(_Collected):
 
     def to_scene(self, scale: float) -> Scene:
         assert self.parsed is not None
-        return _describe(self.parsed, scale).scene
+        return _describe(self.parsed, scale, self.uv_set).scene
 
 
-def collect_toml(path: Path) -> _Collected:
+def collect_toml(path: Path, uv_set: int | None = None) -> _Collected:
     """The :data:`~raytrad.io.loaders.LOADERS` entry for ``.toml`` scene files."""
-    return _TomlCollected(path, parsed=_parse(path))
+    return _TomlCollected(path, uv_set, parsed=_parse(path, uv_set))
 
 
 __all__ = [
