@@ -30,7 +30,7 @@ from raytrad.errors import RaytradError, SceneError, SettingsError
 from raytrad.formfactor import RAY_OFFSET, FormFactorEngine, receiver_points
 from raytrad.image import automatic_camera, render_radiance
 from raytrad.io.atomic import atomic_write
-from raytrad.io.exr import display_encode, encode_png, write_exr, write_png
+from raytrad.io.exr import TONEMAPS, display_encode, encode_png, write_exr, write_png
 from raytrad.io.gltf import BakedPart, write_baked_glb
 from raytrad.io.loaders import load_scene
 from raytrad.io.ply import write_radiosity_ply
@@ -73,6 +73,9 @@ class ImageSettings:
     view : str or None
         Which of the scene file's cameras to use, by name (a glTF camera node's name);
         None: the first. Ignored when ``camera`` is given.
+    tonemap : str
+        Display encoding of the PNG: ``"srgb"`` (clip, sRGB) or ``"aces"`` (filmic ACES
+        output transform; see :func:`raytrad.io.exr.display_encode`).
     """
 
     width: int | None = None
@@ -80,10 +83,15 @@ class ImageSettings:
     samples: int = 4
     camera: Camera | None = None
     view: str | None = None
+    tonemap: str = "srgb"
 
     def __post_init__(self) -> None:
         if (self.width is not None and self.width < 1) or self.height < 1 or self.samples < 1:
             raise SettingsError("image width, height and samples must be at least 1")
+        if self.tonemap not in TONEMAPS:
+            raise SettingsError(
+                f"tone map must be one of {', '.join(TONEMAPS)}, not {self.tonemap!r}"
+            )
 
 
 @dataclass(frozen=True)
@@ -508,7 +516,7 @@ def _write_outputs(
                 **{f"raytrad:{k}": v for k, v in metadata.items()},
             },
         )
-        write_png(outputs["image_preview"], display_encode(radiance * exposure))
+        write_png(outputs["image_preview"], display_encode(radiance * exposure, image.tonemap))
         facts["camera"] = dataclasses.asdict(view)
         facts["camera"]["name"] = (
             "settings" if image.camera else camera.name if camera else "automatic framing"

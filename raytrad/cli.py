@@ -135,6 +135,13 @@ def build_parser() -> argparse.ArgumentParser:
         "automatic framing",
     )
     outputs.add_argument(
+        "--tonemap",
+        choices=("srgb", "aces"),
+        default="srgb",
+        help="display encoding of the image PNG: 'srgb' clips then encodes; 'aces' is the "
+        "filmic ACES output transform of OpenImageIO's colour management (default: %(default)s)",
+    )
+    outputs.add_argument(
         "--view",
         default=None,
         metavar="NAME",
@@ -416,6 +423,7 @@ def _output_settings(args: argparse.Namespace) -> dict[str, Any]:
             samples=args.spp,
             camera=None if args.camera is None else _parse_camera(args.camera),
             view=args.view,
+            tonemap=args.tonemap,
         )
     return out
 

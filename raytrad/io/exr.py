@@ -20,6 +20,7 @@ from typing import Any
 
 import numpy as np
 
+from raytrad.errors import SettingsError
 from raytrad.io.atomic import atomic_path
 
 log = logging.getLogger(__name__)
@@ -234,14 +235,27 @@ def _attribute_value(value: object) -> str | int | float:
     raise TypeError(f"metadata values must be str or numbers, not {type(value).__name__}")
 
 
-def display_encode(linear: np.ndarray) -> np.ndarray:
+#: Display encodings of :func:`display_encode`.
+TONEMAPS = ("srgb", "aces")
+
+#: OpenImageIO's built-in colour configuration: display, scene-linear space, and the prefix
+#: of the ACES output transform's view name (its version differs between releases).
+_DISPLAY, _LINEAR, _ACES_VIEW = "sRGB - Display", "Linear Rec.709 (sRGB)", "ACES"
+
+
+def display_encode(linear: np.ndarray, tonemap: str = "srgb") -> np.ndarray:
     """8-bit display pixels of exposed linear Rec. 709 values, through OpenImageIO's
-    colour management (``linear`` to ``sRGB``): clipped to [0, 1], then encoded.
+    colour management.
 
     Parameters
     ----------
     linear : (H, W, 3) float
         Scene-linear values, already multiplied by the exposure [1].
+    tonemap : str
+        ``"srgb"``: clipped to [0, 1], then sRGB-encoded (``linear`` to ``sRGB``);
+        ``"aces"``: the ACES SDR output transform of OpenImageIO's built-in OCIO
+        configuration for an sRGB display, a filmic curve that rolls highlights off
+        instead of clipping them (1.0 shows as about 0.71, 16 as 0.97).
 
     Returns
     -------
@@ -249,9 +263,27 @@ def display_encode(linear: np.ndarray) -> np.ndarray:
     """
     import OpenImageIO as oiio
 
-    pixels = np.clip(np.ascontiguousarray(linear, dtype=np.float32), 0.0, 1.0)
-    encoded = oiio.ImageBufAlgo.colorconvert(oiio.ImageBuf(pixels), "linear", "sRGB")
+    if tonemap not in TONEMAPS:
+        raise SettingsError(f"tone map must be one of {', '.join(TONEMAPS)}, not {tonemap!r}")
+    pixels = np.ascontiguousarray(linear, dtype=np.float32)
+    if tonemap == "srgb":
+        buf = oiio.ImageBuf(np.clip(pixels, 0.0, 1.0))
+        encoded = oiio.ImageBufAlgo.colorconvert(buf, "linear", "sRGB")
+    else:
+        buf = oiio.ImageBuf(np.maximum(pixels, 0.0))
+        encoded = oiio.ImageBufAlgo.ociodisplay(buf, _DISPLAY, _aces_view(), _LINEAR)
     if encoded.has_error:
         raise RuntimeError(f"OpenImageIO colour conversion failed: {encoded.geterror()}")
     out = np.asarray(encoded.get_pixels(oiio.FLOAT)).reshape(pixels.shape)
     return np.round(np.clip(out, 0.0, 1.0) * 255.0).astype(np.uint8)
+
+
+def _aces_view() -> str:
+    """The ACES SDR view of the built-in configuration's sRGB display."""
+    import OpenImageIO as oiio
+
+    views = [v for v in oiio.ColorConfig().getViewNames(_DISPLAY) if v.startswith(_ACES_VIEW)]
+    sdr = [v for v in views if "SDR" in v] or views
+    if not sdr:
+        raise SettingsError("this OpenImageIO build has no ACES view for an sRGB display")
+    return str(sdr[0])
