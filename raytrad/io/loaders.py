@@ -238,6 +238,22 @@ def _used_vertices(triangles: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return used, local.reshape(-1, 3)
 
 
+def _node_object(tm_scene: trimesh.Scene, node: str) -> str:
+    """The glTF node a trimesh geometry node stands for.
+
+    trimesh names the primitives of a mesh with several ``<node>_<6 hex digits>`` under a
+    geometry-less parent ``<node>``; a single primitive is the node itself.
+    """
+    parent = tm_scene.graph.transforms.parents.get(node)
+    if (
+        parent is not None
+        and parent not in tm_scene.graph.nodes_geometry
+        and re.fullmatch(re.escape(str(parent)) + r"_[0-9a-f]{6}", node)
+    ):
+        return str(parent)
+    return node
+
+
 def _top_down_uv(collected: _Collected, geometry: trimesh.Trimesh) -> np.ndarray | None:
     """(n, 2) per-vertex UVs of a trimesh geometry with v down, or None without any.
 
@@ -257,14 +273,16 @@ def _add_trimesh_scene(
     tm_scene: trimesh.Scene,
     material_of: Callable[[trimesh.Trimesh], _Material],
     objects_by_node: bool = False,
+    uv_available: bool = True,
 ) -> None:
     """Add every triangle geometry of a trimesh scene, placed by its node transform.
 
     Geometry without faces (points, paths) is skipped. A transform that mirrors
     (negative determinant) would turn front faces into back faces, so their winding is
     reversed to keep the front side facing where the mirrored surface faces. With
-    ``objects_by_node`` each scene-graph node is an object (a glTF node); else the file is
-    one object.
+    ``objects_by_node`` each scene-graph node is an object (a glTF node; the primitives of
+    a multi-primitive mesh, which trimesh hangs under their node, join it); else the file
+    is one object. ``uv_available``: whether trimesh's UVs are the set asked for.
     """
     import trimesh
 
@@ -280,7 +298,7 @@ def _add_trimesh_scene(
             )
         used, local = _used_vertices(geometry.faces)
         vertices = np.asarray(geometry.vertices, dtype=np.float64)[used]
-        uv = _top_down_uv(collected, geometry)
+        uv = _top_down_uv(collected, geometry) if uv_available else None
         transform = np.asarray(matrix, dtype=np.float64)
         with np.errstate(invalid="ignore", over="ignore"):  # non-finite input is reported later
             positions = vertices @ transform[:3, :3].T + transform[:3, 3]
@@ -290,7 +308,7 @@ def _add_trimesh_scene(
             positions,
             local,
             material_of(geometry),
-            str(node) if objects_by_node else None,
+            _node_object(tm_scene, str(node)) if objects_by_node else None,
             None if uv is None else uv[used],
         )
 
@@ -331,7 +349,12 @@ def _load_obj(path: Path, uv_set: int | None = None) -> _Collected:
     declared: set[str] = resolver.declared  # type: ignore[attr-defined]
     if not declared and re.search(rb"^[ \t]*mtllib", text, re.MULTILINE):
         collected.warn_once("mtllib", "its mtllib file is missing or declares no materials")
-    _add_trimesh_scene(collected, tm_scene, lambda g: _obj_material(collected, declared, g))
+    _add_trimesh_scene(
+        collected,
+        tm_scene,
+        lambda g: _obj_material(collected, declared, g),
+        uv_available=uv_set == 0,
+    )
     return collected
 
 
