@@ -284,7 +284,8 @@ def test_make_scene_allows_nan_uvs() -> None:
         (np.zeros((3, 3, 2)), "lightmap UVs"),  # one row too few
         (np.zeros((4, 3, 3)), "lightmap UVs"),  # three numbers per corner
         (np.zeros((4, 3)), "lightmap UVs"),  # one number per corner
-        (np.zeros((4, 5)), "malformed"),  # not whole corners
+        (np.zeros((4, 5)), "lightmap UVs"),  # not whole corners
+        (np.zeros((4, 6)), "lightmap UVs"),  # the right count, not per corner
         (np.full((4, 3, 2), np.inf), "infinite"),
     ],
 )
