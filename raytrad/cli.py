@@ -383,7 +383,7 @@ def _uv_set(text: str) -> int | str:
     """``--uv-set``: 'auto', 'atlas' or a set index >= 0."""
     if text in ("auto", "atlas"):
         return text
-    if text.isdigit():
+    if text.isascii() and text.isdigit():
         return int(text)
     raise SettingsError(f"--uv-set wants auto, atlas or a UV set number >= 0, got {text!r}")
 

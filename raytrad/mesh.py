@@ -804,6 +804,7 @@ def fill_hidden(mesh: RadiosityMesh, radiosity: np.ndarray, rings: int = 64) -> 
     tri = mesh.triangle_receivers
     a = np.concatenate([tri[:, 0], tri[:, 1], tri[:, 2], tri[:, 1], tri[:, 2], tri[:, 0]])
     b = np.concatenate([tri[:, 1], tri[:, 2], tri[:, 0], tri[:, 0], tri[:, 1], tri[:, 2]])
+    a, b = np.unique(np.column_stack([a, b]), axis=0).T  # each neighbour once
     count = len(out)
     for _ in range(rings):
         todo = ~known

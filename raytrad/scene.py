@@ -182,9 +182,7 @@ def make_scene(
             scene,
             object_index=np.asarray(object_index, dtype=np.int64).reshape(-1),
             object_names=tuple(str(n) for n in object_names or ()),
-            lightmap_uv=None
-            if lightmap_uv is None
-            else np.asarray(lightmap_uv, dtype=np.float64),
+            lightmap_uv=None if lightmap_uv is None else np.asarray(lightmap_uv, dtype=np.float64),
         )
     except ValueError as exc:
         raise SceneError(source, f"malformed scene arrays ({exc})") from exc

@@ -274,6 +274,7 @@ def _add_trimesh_scene(
     material_of: Callable[[trimesh.Trimesh], _Material],
     objects_by_node: bool = False,
     uv_available: bool = True,
+    node_order: list[str] | None = None,
 ) -> None:
     """Add every triangle geometry of a trimesh scene, placed by its node transform.
 
@@ -282,11 +283,16 @@ def _add_trimesh_scene(
     reversed to keep the front side facing where the mirrored surface faces. With
     ``objects_by_node`` each scene-graph node is an object (a glTF node; the primitives of
     a multi-primitive mesh, which trimesh hangs under their node, join it); else the file
-    is one object. ``uv_available``: whether trimesh's UVs are the set asked for.
+    is one object. ``uv_available``: whether trimesh's UVs are the set asked for;
+    ``node_order``: node names in file order, to add objects in.
     """
     import trimesh
 
-    for node in tm_scene.graph.nodes_geometry:
+    nodes = list(tm_scene.graph.nodes_geometry)
+    if node_order:  # objects in the file's node order, not trimesh's graph order
+        rank = {name: i for i, name in enumerate(node_order)}
+        nodes.sort(key=lambda n: rank.get(_node_object(tm_scene, str(n)), len(rank)))
+    for node in nodes:
         matrix, geometry_name = tm_scene.graph[node]
         geometry = tm_scene.geometry.get(geometry_name)
         if not isinstance(geometry, trimesh.Trimesh) or len(geometry.faces) == 0:
@@ -434,7 +440,7 @@ def _load_gltf(path: Path, uv_set: int | None = None) -> _Collected:
     materials = _gltf_materials(collected, document)
     _select_texcoord(collected, document)
     payload = json.dumps(document).encode("utf-8")
-    return _load_gltf_payload(collected, payload, "gltf", materials)
+    return _load_gltf_payload(collected, payload, "gltf", materials, _node_names(document))
 
 
 def _load_glb(path: Path, uv_set: int | None = None) -> _Collected:
@@ -448,7 +454,7 @@ def _load_glb(path: Path, uv_set: int | None = None) -> _Collected:
     materials = _gltf_materials(collected, document)
     _select_texcoord(collected, document)
     payload = _join_glb(json.dumps(document).encode("utf-8"), rest)
-    return _load_gltf_payload(collected, payload, "glb", materials)
+    return _load_gltf_payload(collected, payload, "glb", materials, _node_names(document))
 
 
 def _split_glb(path: Path, data: bytes) -> tuple[bytes, bytes]:
@@ -572,8 +578,20 @@ def _gltf_material(collected: _Collected, index: int, spec: dict[str, Any]) -> _
     return _Material(name, reflectance, (emitted[0], emitted[1], emitted[2]), double_sided)
 
 
+def _node_names(document: dict[str, Any]) -> list[str]:
+    """The names of a glTF document's nodes, in file order (unnamed ones left out)."""
+    nodes = document.get("nodes")
+    if not isinstance(nodes, list):
+        return []
+    return [str(n["name"]) for n in nodes if isinstance(n, dict) and "name" in n]
+
+
 def _load_gltf_payload(
-    collected: _Collected, payload: bytes, file_type: str, materials: list[_Material]
+    collected: _Collected,
+    payload: bytes,
+    file_type: str,
+    materials: list[_Material],
+    node_order: list[str] | None = None,
 ) -> _Collected:
     """Parse the rewritten glTF/GLB bytes with trimesh and collect its triangles."""
     import trimesh
@@ -603,7 +621,7 @@ def _load_gltf_payload(
             return _GLTF_DEFAULT_MATERIAL
         return materials[int(match.group(1))]
 
-    _add_trimesh_scene(collected, tm_scene, material_of, objects_by_node=True)
+    _add_trimesh_scene(collected, tm_scene, material_of, True, node_order=node_order)
     return collected
 
 

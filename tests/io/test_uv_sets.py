@@ -556,3 +556,12 @@ def test_toml_scene_description_passes_the_uv_set(tmp_path: Path) -> None:
     assert scene.lightmap_uv is not None
     np.testing.assert_allclose(scene.lightmap_uv, _expected_uv(index, perm, uv), atol=F32_ATOL)
     assert load_scene_description(path).scene.lightmap_uv is None
+
+
+def test_gltf_objects_come_in_file_node_order() -> None:
+    path = Path(__file__).resolve().parents[2] / "scenes" / "cornell-box-uv.glb"
+    data = path.read_bytes()
+    length = int.from_bytes(data[12:16], "little")
+    document = json.loads(data[20 : 20 + length])
+    meshes = [n["name"] for n in document["nodes"] if "mesh" in n]
+    assert list(load_scene(path).object_names) == meshes
