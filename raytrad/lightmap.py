@@ -42,6 +42,9 @@ from raytrad.mesh import RadiosityMesh
 
 log = logging.getLogger(__name__)
 
+#: Fraction of a model's UV texels covered twice above which the bake warns.
+OVERLAP_WARNING = 0.005
+
 #: Most (triangle, texel) candidates held in memory at once by :func:`rasterize`.
 RASTER_BUDGET = 1 << 21
 
@@ -120,8 +123,9 @@ class Lightmap:
         Normalised lightmap UV of each corner of each refined mesh triangle.
     stats : dict of str to float
         ``texel_density_min``, ``texel_density_median``, ``texel_density_max``
-        [texels m-1] (area-weighted over triangles), ``covered_fraction`` [1] and
-        ``seconds`` (bake time) [s].
+        [texels m-1] (area-weighted over triangles), ``covered_fraction`` [1],
+        ``overlap_fraction`` [1] (of the texels whose centre some triangle covers, those
+        covered by two or more: overlapping UV charts) and ``seconds`` (bake time) [s].
     settings : LightmapSettings
     triangles : (T,) int64 or None
         The refined mesh triangles this lightmap covers (one mesh's, per-mesh); None: all,
@@ -330,6 +334,7 @@ def rasterize(
     values_at_corners: np.ndarray,
     size: tuple[int, int],
     priority: np.ndarray | None = None,
+    centre_count: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Interpolate per-corner values over triangles into an image, conservatively.
 
@@ -355,6 +360,9 @@ def rasterize(
     priority : (T,) int or None
         Tie-break between triangles at the same distance (lower wins), e.g. the front of a
         double-sided face over its back copy when both share UVs.
+    centre_count : (H * W,) int64 or None
+        If given, incremented for each triangle of priority 0 whose interior (not an
+        edge) holds the texel's centre: more than 1 where UV charts overlap.
 
     Returns
     -------
@@ -409,6 +417,11 @@ def rasterize(
             )
             t = tri[k]
             x, y = lo[t, 0] + dx[j], lo[t, 1] + dy[j]
+            if centre_count is not None:
+                # strictly inside: a centre on an edge (xatlas puts vertices on texel
+                # centres) belongs to two neighbours, not to an overlap
+                inside = (distance == 0.0) & (rank[t] == 0) & (weights.min(axis=1) > 1e-9)
+                np.add.at(centre_count, (y * width + x)[inside], 1)
             _keep_nearest(
                 y * width + x,
                 distance,
@@ -639,12 +652,24 @@ def bake_lightmap(
     if existing_uv is not None and source_corners is not None:
         priority = _back_copies(mesh, np.asarray(source_corners, dtype=np.float64))[rows]
     values = radiosity[mesh.triangle_receivers[rows]]
-    pixels, coverage = rasterize(uv, values, size, priority)
+    counts = np.zeros(size[0] * size[1], dtype=np.int64)
+    pixels, coverage = rasterize(uv, values, size, priority, counts)
 
     grown, reached = grow_charts(pixels, coverage, max(settings.padding, 1))
     filled = dilate(grown, reached)
     stats = texel_density_stats(uv, mesh.triangle_area[rows])
     stats["covered_fraction"] = float(coverage.mean())
+    stats["overlap_fraction"] = float((counts > 1).sum() / max((counts > 0).sum(), 1))
+    if existing_uv is not None and stats["overlap_fraction"] > OVERLAP_WARNING:
+        log.warning(
+            "lightmap%s: the model's UVs overlap on %.1f %% of their texels; overlapping "
+            "surfaces share those texels and show one value (%s)",
+            f" {name!r}" if name else "",
+            100.0 * stats["overlap_fraction"],
+            "use --uv-set atlas, or --lightmap-per-mesh if each mesh has its own UV square"
+            if not name
+            else "use --uv-set atlas",
+        )
     stats["seconds"] = time.perf_counter() - started
     log.info(
         "lightmap%s %d x %d: %.1f %% covered, %.4g to %.4g texels m-1 (median %.4g), %.2f s",

@@ -627,3 +627,31 @@ def test_dilation_keeps_covered_texels_and_fills_the_rest() -> None:
     inside = pixels[coverage]
     assert (filled >= inside.min(axis=0) - 1e-6).all()
     assert (filled <= inside.max(axis=0) + 1e-6).all()
+
+
+# --------------------------------------------------------------------------------------
+# Overlapping model UVs
+# --------------------------------------------------------------------------------------
+
+
+def test_non_overlapping_layouts_report_no_overlap(
+    baked: tuple[RadiosityMesh, np.ndarray, Lightmap],
+) -> None:
+    _, _, lightmap = baked
+    assert lightmap.stats["overlap_fraction"] < 1e-3
+
+
+def test_overlapping_model_uvs_are_measured_and_warned(
+    cornell_solved: tuple[api.Prepared, SolveResult], caplog: pytest.LogCaptureFixture
+) -> None:
+    # every scene triangle mapped onto the same UV triangle: all charts stack up
+    prepared, result = cornell_solved
+    corners = prepared.scene.triangle_vertices()
+    uv = np.broadcast_to([[0.1, 0.1], [0.9, 0.1], [0.1, 0.9]], (len(corners), 3, 2))
+    settings = LightmapSettings(resolution=64, uv_set=1)
+    with caplog.at_level("WARNING"):
+        lightmap = bake_lightmap(prepared.mesh, result.radiosity, settings, uv.copy(), corners)
+    # the refined triangles of each scene triangle tile the UV triangle once, so every
+    # texel centre inside it is covered once per front-facing scene triangle
+    assert lightmap.stats["overlap_fraction"] > 0.95
+    assert "overlap" in caplog.text and "--uv-set atlas" in caplog.text
