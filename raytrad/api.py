@@ -486,10 +486,11 @@ def _write_outputs(
     """Write every asked-for output; return their paths and facts for the report."""
     mesh = prepared.mesh
     emitting = np.asarray((mesh.receiver_emitted_exitance > 0).any(axis=1))
-    exposure = auto_exposure(result.radiosity, emitting) * 2.0**settings.exposure
     # hidden receivers take their visible neighbours' radiosity in what is shown
     shown = fill_hidden(mesh, result.radiosity)
-    colors = display_colors(shown, emitting, settings.exposure)
+    area = mesh.receiver_area
+    exposure = auto_exposure(shown, emitting, area) * 2.0**settings.exposure
+    colors = display_colors(shown, emitting, settings.exposure, area)
     outputs = {"ply": output_dir / f"{stem}.ply"}
     facts: dict[str, Any] = {"exposure": exposure}
     write_radiosity_ply(

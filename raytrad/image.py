@@ -31,8 +31,18 @@ _OUTSIDE_VIEWS = (
 )
 #: Fraction of the frame covered by surfaces that counts as filled for the view score.
 _FULL_COVERAGE = 0.5
-#: Horizontal directions in which inside viewpoints stand back from the centre.
-_INSIDE_VIEWS = ((0.0, 0.0, -1.0), (0.0, 0.0, 1.0), (1.0, 0.0, 0.0), (-1.0, 0.0, 0.0))
+#: Where inside viewpoints stand, as fractions of the half-extent from the centre: the
+#: four upper corners (looking down across the room), then back from each side.
+_INSIDE_VIEWS = (
+    (0.8, 0.6, -0.8),
+    (-0.8, 0.6, -0.8),
+    (0.8, 0.6, 0.8),
+    (-0.8, 0.6, 0.8),
+    (0.0, 0.0, -0.8),
+    (0.0, 0.0, 0.8),
+    (0.8, 0.0, 0.0),
+    (-0.8, 0.0, 0.0),
+)
 
 
 def automatic_camera(
@@ -42,8 +52,8 @@ def automatic_camera(
 
     Candidates are the classic front view (:func:`framing_camera`), elevated
     three-quarter and side views from outside the bounding box (all of it in frame), and
-    views from inside it, standing back from the centre toward each side (for closed
-    rooms, whose outside is the back of their walls). Each is scored by a
+    views from inside it (for closed rooms, whose outside is the back of their walls):
+    from its upper corners looking down across it, then back from each side. Each is scored by a
     ``probe``-sized image of primary rays: the fraction of surface hits that see a lit side
     (front of a one-sided face, either side of a two-sided one, not the black back of a
     wall), times the fraction of the frame covered by surfaces up to a half (views that
@@ -90,19 +100,36 @@ def _candidate_cameras(positions: np.ndarray, vertical_fov_deg: float) -> list[C
     lo, hi = positions.min(axis=0), positions.max(axis=0)
     centre = 0.5 * (lo + hi)
     half = 0.5 * (hi - lo)
-    radius = float(np.linalg.norm(half))
-    distance = 1.05 * radius / math.sin(math.radians(vertical_fov_deg) / 2.0)
     target = (float(centre[0]), float(centre[1]), float(centre[2]))
     cameras = [framing_camera(positions, vertical_fov_deg)]
+    box = centre + half * np.array(np.meshgrid([-1, 1], [-1, 1], [-1, 1])).reshape(3, -1).T
     for view in _OUTSIDE_VIEWS:
         direction = np.asarray(view) / np.linalg.norm(view)
+        probe = Camera(_triple(centre + direction), target, (0.0, 1.0, 0.0), vertical_fov_deg)
+        distance = _fitting_distance(probe, box - centre)
         position = centre + distance * direction
         cameras.append(Camera(_triple(position), target, (0.0, 1.0, 0.0), vertical_fov_deg))
     wide = max(vertical_fov_deg, 60.0)
+    below = _triple(centre - np.array([0.0, 0.4 * half[1], 0.0]))  # the floor in view
     for view in _INSIDE_VIEWS:
-        position = centre + 0.8 * half * np.asarray(view)
-        cameras.append(Camera(_triple(position), target, (0.0, 1.0, 0.0), wide))
+        position = centre + half * np.asarray(view)
+        look = below if view[1] > 0 else target
+        cameras.append(Camera(_triple(position), look, (0.0, 1.0, 0.0), wide))
     return cameras
+
+
+def _fitting_distance(camera: Camera, offsets: np.ndarray) -> float:
+    """Distance [m] from the target at which ``camera``'s direction frames every offset.
+
+    A point at ``offset`` from the target has depth ``distance + offset . forward``; it is
+    in a square frame when its sideways and upward offsets are at most depth x tan(fov/2).
+    5 % margin; never closer than just outside the points.
+    """
+    right, up, forward = camera.basis()
+    tan = math.tan(math.radians(camera.vertical_fov_deg) / 2.0)
+    along = offsets @ forward
+    sideways = np.maximum(np.abs(offsets @ right), np.abs(offsets @ up))
+    return 1.05 * float(max((sideways / tan - along).max(), (-along).max() * 1.05 + 1e-9))
 
 
 def _triple(values: np.ndarray) -> tuple[float, float, float]:

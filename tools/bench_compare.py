@@ -51,8 +51,10 @@ def main(argv: list[str] | None = None) -> int:
         for name, path in scene_files(Path(tmp)).items():
             summary = compare(path, args.out / name, list(SHOOTING_METHODS), settings)
             rows = {row["method"]: row for row in summary["table"]}
-            print(f"\n## {name}: {summary['receivers']} receivers, {summary['patches']} "
-                  f"patches, reference {summary['reference']['kind']}\n")
+            print(
+                f"\n## {name}: {summary['receivers']} receivers, {summary['patches']} "
+                f"patches, reference {summary['reference']['kind']}\n"
+            )
             print(markdown_table(summary["table"]), end="")
             ambient = rows["ambient"]["shots_to_0.001"]
             progressive = rows["progressive"]["shots_to_0.001"]
