@@ -105,7 +105,8 @@ def build_parser() -> argparse.ArgumentParser:
     outputs.add_argument(
         "--lightmap-per-mesh",
         action="store_true",
-        help="one lightmap per mesh (glTF node, TOML [[mesh]]): DIR/<name>.<mesh>.lightmap.exr",
+        help="one lightmap per mesh (glTF node, OBJ object, TOML [[mesh]]): "
+        "DIR/<name>.<mesh>.lightmap.exr",
     )
     outputs.add_argument(
         "--image",

@@ -75,7 +75,8 @@ class LightmapSettings:
         ``TEXCOORD_<n>``; OBJ ``vt`` and PLY ``s, t`` are set 0), which every face must
         have. The UVs themselves are passed to :func:`bake_lightmap`.
     per_mesh : bool
-        One lightmap per mesh (glTF node, TOML ``[[mesh]]``) instead of one per scene.
+        One lightmap per mesh (glTF node, OBJ ``o`` object or else ``g`` group, TOML
+        ``[[mesh]]``) instead of one per scene.
     """
 
     resolution: int = 1024

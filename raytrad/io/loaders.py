@@ -272,7 +272,7 @@ def _add_trimesh_scene(
     collected: _Collected,
     tm_scene: trimesh.Scene,
     material_of: Callable[[trimesh.Trimesh], _Material],
-    objects_by_node: bool = False,
+    object_of: Callable[[str, trimesh.Trimesh], str | None] | None = None,
     uv_available: bool = True,
     node_order: list[str] | None = None,
 ) -> None:
@@ -280,23 +280,24 @@ def _add_trimesh_scene(
 
     Geometry without faces (points, paths) is skipped. A transform that mirrors
     (negative determinant) would turn front faces into back faces, so their winding is
-    reversed to keep the front side facing where the mirrored surface faces. With
-    ``objects_by_node`` each scene-graph node is an object (a glTF node; the primitives of
-    a multi-primitive mesh, which trimesh hangs under their node, join it); else the file
-    is one object. ``uv_available``: whether trimesh's UVs are the set asked for;
-    ``node_order``: node names in file order, to add objects in.
+    reversed to keep the front side facing where the mirrored surface faces.
+    ``object_of(node, geometry)`` names the object (mesh) the geometry belongs to (None,
+    or no ``object_of``: the file's stem); ``uv_available``: whether trimesh's UVs are the
+    set asked for; ``node_order``: object names in file order, to add objects in.
     """
     import trimesh
 
-    nodes = list(tm_scene.graph.nodes_geometry)
-    if node_order:  # objects in the file's node order, not trimesh's graph order
-        rank = {name: i for i, name in enumerate(node_order)}
-        nodes.sort(key=lambda n: rank.get(_node_object(tm_scene, str(n)), len(rank)))
-    for node in nodes:
+    objects = object_of or (lambda node, geometry: None)
+    placed = []
+    for node in tm_scene.graph.nodes_geometry:
         matrix, geometry_name = tm_scene.graph[node]
         geometry = tm_scene.geometry.get(geometry_name)
-        if not isinstance(geometry, trimesh.Trimesh) or len(geometry.faces) == 0:
-            continue
+        if isinstance(geometry, trimesh.Trimesh) and len(geometry.faces):
+            placed.append((matrix, geometry, objects(str(node), geometry)))
+    if node_order:  # objects in the file's order, not trimesh's graph order
+        rank = {name: i for i, name in enumerate(node_order)}
+        placed.sort(key=lambda item: rank.get(item[2] or "", len(rank)))
+    for matrix, geometry, object_name in placed:
         if geometry.vertices.ndim != 2 or geometry.vertices.shape[1] != 3:
             raise SceneError(
                 collected.path,
@@ -314,7 +315,7 @@ def _add_trimesh_scene(
             positions,
             local,
             material_of(geometry),
-            _node_object(tm_scene, str(node)) if objects_by_node else None,
+            object_name,
             None if uv is None else uv[used],
         )
 
@@ -339,7 +340,8 @@ def _load_obj(path: Path, uv_set: int | None = None) -> _Collected:
         raise SceneError(path, "cannot parse as OBJ: binary data (NUL bytes), not OBJ text")
     # Undecodable bytes (a Latin-1 comment, say) become U+FFFD instead of failing in trimesh.
     text = data.decode("utf-8", errors="replace").encode("utf-8")
-    resolver = _mtl_resolver(path.parent)
+    text, object_names, material_objects = _tag_objects(text)
+    resolver = _mtl_resolver(path.parent, material_objects)
     collected = _Collected(path, uv_set)
     try:
         tm_scene = trimesh.load_scene(  # = trimesh.load(..., force="scene")
@@ -353,24 +355,99 @@ def _load_obj(path: Path, uv_set: int | None = None) -> _Collected:
     except Exception as exc:  # trimesh raises many types for malformed input
         raise SceneError(path, f"cannot parse as OBJ: {_reason(exc)}") from exc
     declared: set[str] = resolver.declared  # type: ignore[attr-defined]
-    if not declared and re.search(rb"^[ \t]*mtllib", text, re.MULTILINE):
+    if not declared and re.search(rb"^[ \t]*mtllib", data, re.MULTILINE):
         collected.warn_once("mtllib", "its mtllib file is missing or declares no materials")
+
+    def object_of(node: str, geometry: trimesh.Trimesh) -> str | None:
+        material = getattr(geometry.visual, "material", None)
+        tagged = _OBJECT_TAG.match(str(getattr(material, "name", "")))
+        return None if tagged is None else object_names[int(tagged.group(2))]
+
     _add_trimesh_scene(
         collected,
         tm_scene,
         lambda g: _obj_material(collected, declared, g),
+        object_of,
         uv_available=uv_set == 0,
+        node_order=object_names,
     )
     return collected
 
 
-def _mtl_resolver(directory: Path) -> trimesh.resolvers.FilePathResolver:
+_STAND_IN_MTL = b"__raytrad_objects__.mtl"
+_OBJECT_TAG = re.compile(r"^(.*)__raytrad_object_(\d+)__$", re.DOTALL)
+_OBJECT_LINE = re.compile(rb"^[ \t]*(o|g|usemtl)(?:[ \t]+([^\r\n]*?))?[ \t]*(\r?)$", re.MULTILINE)
+
+
+def _tag_objects(text: bytes) -> tuple[bytes, list[str], dict[str, set[int]]]:
+    """OBJ text whose ``usemtl`` names also say which object they are used in.
+
+    trimesh (5.2) groups OBJ faces by material but mislabels its objects, so the object
+    goes into the material name: ``usemtl M`` inside object ``k`` becomes ``usemtl
+    M__raytrad_object_k__``, and each ``o`` line restates the current material, tagged.
+    Objects are ``o`` statements, or ``g`` groups in a file without any ``o``; a file with
+    neither is returned unchanged. A file without ``mtllib`` gets one naming a stand-in
+    MTL file, which the resolver of :func:`_mtl_resolver` fills with the tagged names.
+
+    Returns
+    -------
+    text : bytes
+    object_names : list of str
+        Name of object ``k`` (repeated names are one object).
+    material_objects : dict of str to set of int
+        The objects each material name (``""`` for none) is used in.
+    """
+    keyword = b"o" if re.search(rb"^[ \t]*o[ \t]+\S", text, re.MULTILINE) else b"g"
+    if not re.search(rb"^[ \t]*" + keyword + rb"[ \t]+\S", text, re.MULTILINE):
+        return text, [], {}
+    tagger = _ObjectTagger(keyword)
+    text = _OBJECT_LINE.sub(tagger, text)
+    if not re.search(rb"^[ \t]*mtllib[ \t]", text, re.MULTILINE):
+        text = b"mtllib " + _STAND_IN_MTL + b"\n" + text  # to declare the tagged names
+    return text, tagger.names, tagger.used
+
+
+class _ObjectTagger:
+    """The ``re.sub`` callback of :func:`_tag_objects`, keeping the current material and
+    object as it walks the ``o``/``g``/``usemtl`` lines in file order."""
+
+    def __init__(self, keyword: bytes) -> None:
+        self.keyword = keyword
+        self.material = ""
+        self.object = -1
+        self.names: list[str] = []
+        self.used: dict[str, set[int]] = {}
+
+    def tagged(self) -> bytes:
+        self.used.setdefault(self.material, set()).add(self.object)
+        return f"usemtl {self.material}__raytrad_object_{self.object}__".encode()
+
+    def __call__(self, match: re.Match[bytes]) -> bytes:
+        word, cr = match.group(1), match.group(3)
+        rest = (match.group(2) or b"").decode("utf-8", errors="replace")
+        if word == b"usemtl":
+            self.material = rest
+            return self.tagged() + cr if self.object >= 0 else match.group(0)
+        if word != self.keyword or not rest:
+            return match.group(0)
+        if rest not in self.names:
+            self.names.append(rest)
+        self.object = self.names.index(rest)
+        return match.group(0) + b"\n" + self.tagged() + cr
+
+
+def _mtl_resolver(
+    directory: Path, material_objects: dict[str, set[int]] | None = None
+) -> trimesh.resolvers.FilePathResolver:
     """A file resolver that fixes MTL text for trimesh and notes the materials it declares.
 
     The MTL format allows ``Kd r`` for ``Kd r r r``, but trimesh 5.2 then fails to build
     every material of the file (silently), so one-number ``Kd``/``Ka``/``Ks`` lines are
     repeated to three numbers. The ``newmtl`` names read are kept in ``.declared`` to tell
-    MTL materials from the placeholder trimesh gives faces that have none.
+    MTL materials from the placeholder trimesh gives faces that have none. Each material
+    of ``material_objects`` is repeated under the object-tagged names of
+    :func:`_tag_objects` (with an empty body when the MTL lacks it), so every tagged face
+    group keeps its name through trimesh, which reads only the file's first ``mtllib``.
     """
     from trimesh.resolvers import FilePathResolver
 
@@ -378,20 +455,47 @@ def _mtl_resolver(directory: Path) -> trimesh.resolvers.FilePathResolver:
         declared: set[str]
 
         def get(self, name: str) -> bytes:
-            data: bytes = super().get(name)
+            try:
+                data: bytes = super().get(name)
+            except OSError:
+                if not material_objects or not name.lower().endswith(".mtl"):
+                    raise
+                data = b""  # a missing (or the stand-in) MTL still carries the objects
             if name.lower().endswith(".mtl"):
                 data = _SCALAR_COLOUR.sub(rb"\1\2 \2 \2\3", data)
                 text = data.decode("utf-8", errors="replace")
-                self.declared.update(
+                real = {
                     " ".join(words[1:])
                     for words in (line.split() for line in text.splitlines())
                     if len(words) > 1 and words[0].lower() == "newmtl"
-                )
+                }
+                self.declared.update(real)
+                data += _tagged_copies(data, real, material_objects or {})
             return data
 
     resolver = _MtlResolver(str(directory))
     resolver.declared = set()
     return resolver
+
+
+def _tagged_copies(mtl: bytes, real: set[str], material_objects: dict[str, set[int]]) -> bytes:
+    """MTL blocks repeated under the object-tagged names of :func:`_tag_objects`.
+
+    A material the MTL declares (in ``real``) is copied with its body; one it lacks (or
+    no material, ``""``) gets an empty block, read as the grey default.
+    """
+    bodies: dict[str, bytes] = {}
+    for block in re.split(rb"(?m)^(?=[ \t]*newmtl[ \t])", mtl):
+        head, _, body = block.partition(b"\n")
+        words = head.decode("utf-8", errors="replace").split()
+        if len(words) > 1 and words[0].lower() == "newmtl":
+            bodies.setdefault(" ".join(words[1:]), body)
+    copies = [
+        f"\nnewmtl {base}__raytrad_object_{k}__\n".encode() + bodies.get(base, b"")
+        for base, objects in sorted(material_objects.items())
+        for k in sorted(objects)
+    ]
+    return b"".join(copies)
 
 
 def _obj_material(
@@ -400,6 +504,8 @@ def _obj_material(
     """The MTL material of one trimesh geometry, or the grey default (warned once)."""
     material = getattr(geometry.visual, "material", None)
     name = getattr(material, "name", None)
+    tagged = _OBJECT_TAG.match(name) if isinstance(name, str) else None
+    name = name if tagged is None else tagged.group(1)
     if material is None or name not in declared:
         collected.warn_once(
             "default",
@@ -621,7 +727,13 @@ def _load_gltf_payload(
             return _GLTF_DEFAULT_MATERIAL
         return materials[int(match.group(1))]
 
-    _add_trimesh_scene(collected, tm_scene, material_of, True, node_order=node_order)
+    _add_trimesh_scene(
+        collected,
+        tm_scene,
+        material_of,
+        lambda node, geometry: _node_object(tm_scene, node),
+        node_order=node_order,
+    )
     return collected
 
 
