@@ -114,7 +114,10 @@ def _candidate_cameras(positions: np.ndarray, vertical_fov_deg: float) -> list[C
     for view in _INSIDE_VIEWS:
         position = centre + half * np.asarray(view)
         look = below if view[1] > 0 else target
-        cameras.append(Camera(_triple(position), look, (0.0, 1.0, 0.0), wide))
+        try:  # a flat scene has no inside: the view would stand on its target
+            cameras.append(Camera(_triple(position), look, (0.0, 1.0, 0.0), wide))
+        except SettingsError:
+            continue
     return cameras
 
 
