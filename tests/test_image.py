@@ -16,7 +16,7 @@ from raytrad.cli import main
 from raytrad.image import automatic_camera, framing_camera, render_radiance, twin_triangles
 from raytrad.io.exr import read_image
 from raytrad.mesh import MeshSettings, RadiosityMesh
-from raytrad.scene import Scene
+from raytrad.scene import Scene, make_scene
 from raytrad.scenes import cornell_box, furnace_box
 
 REPOSITORY = Path(__file__).resolve().parents[1]
@@ -167,3 +167,14 @@ def test_automatic_camera_goes_inside_a_closed_room() -> None:
     assert (np.asarray(camera.position) > lo).all() and (np.asarray(camera.position) < hi).all()
     image = render_radiance(mesh, np.ones((mesh.receiver_count, 3)), camera, 32, 24, 1)
     assert (image > 0).all()  # every pixel sees the lit inside of a wall
+
+
+def test_automatic_camera_of_a_flat_scene_sees_its_lit_side() -> None:
+    # one upright quad facing -z: a flat bounding box, no inside to stand in
+    quad = np.array([[0, 0, 0], [0, 1, 0], [1, 1, 0], [1, 0, 0]], dtype=float)
+    scene = make_scene(quad, [[0, 1, 2], [0, 2, 3]], [0, 0], ["m"], [[0.5] * 3], [[1.0] * 3])
+    mesh = _prepared_mesh(scene)
+    camera = automatic_camera(mesh)
+    assert camera.position[2] < 0.0  # in front of the lit side
+    image = render_radiance(mesh, np.ones((mesh.receiver_count, 3)), camera, 32, 24, 1)
+    assert (image > 0).any()
