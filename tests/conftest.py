@@ -22,6 +22,31 @@ from raytrad.solver import SolveResult, SolveSettings, solve
 REPOSITORY = Path(__file__).resolve().parents[1]
 SCENES = REPOSITORY / "scenes"
 
+#: The objects of ``cornell_box()`` and ``scenes/cornell-box-uv.glb``, in file order.
+CORNELL_OBJECTS = (
+    "floor",
+    "ceiling",
+    "back-wall",
+    "right-wall",
+    "left-wall",
+    "light",
+    "short-block",
+    "tall-block",
+)
+
+
+def run_cli(argv: list[str], capsys: pytest.CaptureFixture[str]) -> tuple[int, str, str]:
+    """``raytrad.cli.main(argv)`` in-process: (exit status, stdout, stderr)."""
+    from raytrad.cli import main
+
+    try:
+        status = main(argv)
+    except SystemExit as exc:  # argparse errors and --help
+        status = exc.code if isinstance(exc.code, int) else 1
+    captured = capsys.readouterr()
+    return status, captured.out, captured.err
+
+
 #: A furnace box at about 1700 receivers and 100 patches: fast, and every test agrees on it.
 FURNACE_MESH = MeshSettings(receivers=1500, patches=100)
 #: The Cornell box small enough for a dense reference solve in about a second.

@@ -13,27 +13,16 @@ import numpy as np
 import pytest
 
 from raytrad import api
-from raytrad.cli import main
 from raytrad.io.ply import read_radiosity_ply
 from raytrad.mesh import MeshSettings
 from raytrad.scenes import cornell_box, write_obj
 from raytrad.solver import SHOOTING_METHODS, SolveSettings
 
-from .conftest import SCENES
+from .conftest import SCENES, run_cli
 
 FURNACE_OBJ = SCENES / "furnace.obj"  # unit cube, Kd 0.5, Ke 1: B = 2 everywhere
 SMALL = ["--receivers", "800", "--patches", "60", "-q"]
 TRIANGLE = "v 0 0 0\nv 1 0 0\nv 0 1 0\n"
-
-
-def run(argv: list[str], capsys: pytest.CaptureFixture[str]) -> tuple[int, str, str]:
-    """``raytrad.cli.main(argv)`` in-process: (exit status, stdout, stderr)."""
-    try:
-        status = main(argv)
-    except SystemExit as exc:  # argparse errors and --help
-        status = exc.code if isinstance(exc.code, int) else 1
-    captured = capsys.readouterr()
-    return status, captured.out, captured.err
 
 
 def _ledger_balances(energy: dict[str, list[float]]) -> bool:
@@ -44,7 +33,7 @@ def _ledger_balances(energy: dict[str, list[float]]) -> bool:
 
 def test_render_furnace(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     out = tmp_path / "out"
-    status, _, err = run(["render", str(FURNACE_OBJ), "-o", str(out), *SMALL], capsys)
+    status, _, err = run_cli(["render", str(FURNACE_OBJ), "-o", str(out), *SMALL], capsys)
     assert status == 0, err
     positions, triangles, radiosity = read_radiosity_ply(out / "furnace.ply")
     assert len(positions) > 500 and len(triangles) > 500
@@ -63,7 +52,7 @@ def test_max_shots_stops_early_and_says_so(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     out = tmp_path / "out"
-    status, _, err = run(
+    status, _, err = run_cli(
         ["render", str(FURNACE_OBJ), "-o", str(out), "--max-shots", "3", *SMALL], capsys
     )
     assert status == 0, err
@@ -124,7 +113,7 @@ def test_bad_scene_is_one_line_and_writes_nothing(
     elif content is not None:
         scene.write_text(content)
     out = tmp_path / "out"
-    status, stdout, err = run(["render", str(scene), "-o", str(out), "-q"], capsys)
+    status, stdout, err = run_cli(["render", str(scene), "-o", str(out), "-q"], capsys)
     assert status == 1
     lines = err.strip().splitlines()
     assert len(lines) == 1, err
@@ -152,7 +141,9 @@ def test_bad_option_values_are_refused(
     tmp_path: Path, capsys: pytest.CaptureFixture[str], option: str, value: str, word: str
 ) -> None:
     out = tmp_path / "out"
-    status, _, err = run(["render", str(FURNACE_OBJ), "-o", str(out), option, value, "-q"], capsys)
+    status, _, err = run_cli(
+        ["render", str(FURNACE_OBJ), "-o", str(out), option, value, "-q"], capsys
+    )
     assert status != 0
     assert word in err.lower()
     assert "Traceback" not in err
@@ -160,7 +151,7 @@ def test_bad_option_values_are_refused(
 
 
 def test_render_help_lists_every_method(capsys: pytest.CaptureFixture[str]) -> None:
-    status, out, _ = run(["render", "--help"], capsys)
+    status, out, _ = run_cli(["render", "--help"], capsys)
     assert status == 0
     for method in SHOOTING_METHODS:
         assert method in out
@@ -174,7 +165,7 @@ def test_scene_without_emitter_warns_and_writes_zeros(
     (tmp_path / "dark.mtl").write_text("newmtl m\nKd 0.5 0.5 0.5\nKe 0 0 0\n")
     out = tmp_path / "out"
     with caplog.at_level(logging.WARNING):
-        status, _, err = run(["render", str(scene), "-o", str(out), *SMALL], capsys)
+        status, _, err = run_cli(["render", str(scene), "-o", str(out), *SMALL], capsys)
     assert status == 0, err
     assert any(
         "no emitter" in r.getMessage() for r in caplog.records if r.levelno >= logging.WARNING
@@ -222,7 +213,7 @@ def test_resume_refuses_a_checkpoint_of_other_settings(
     api.render(FURNACE_OBJ, out, settings, stop=lambda: next(polls) >= 3)
     assert (out / "furnace.checkpoint.npz").is_file()
     # a different mesh is a different discrete system: the checkpoint must not be mixed in
-    status, _, err = run(
+    status, _, err = run_cli(
         ["render", str(FURNACE_OBJ), "-o", str(out), "--receivers", "900", "--resume", "-q"],
         capsys,
     )

@@ -15,7 +15,6 @@ import numpy as np
 import pytest
 
 from raytrad import api
-from raytrad.cli import main
 from raytrad.errors import SceneError, SettingsError
 from raytrad.io.exr import read_attributes, read_image
 from raytrad.io.gltf import BakedPart, write_baked_glb
@@ -26,21 +25,11 @@ from raytrad.scene import Scene
 from raytrad.scenes import cornell_box
 from raytrad.solver import SolveResult
 
-from .conftest import REPOSITORY, SCENES, one_quad_scene
+from .conftest import CORNELL_OBJECTS, REPOSITORY, SCENES, one_quad_scene, run_cli
 
 MESH = MeshSettings(receivers=600, patches=60)
 CORNELL_UV = SCENES / "cornell-box-uv.glb"
 SCHEMA_PATH = REPOSITORY / "docs" / "report.schema.json"
-OBJECTS = (
-    "floor",
-    "ceiling",
-    "back-wall",
-    "right-wall",
-    "left-wall",
-    "light",
-    "short-block",
-    "tall-block",
-)
 Solved = tuple[api.Prepared, SolveResult]
 
 
@@ -131,16 +120,6 @@ def _glb_json(path: Path) -> dict[str, Any]:
     return dict(json.loads(data[20 : 20 + length]))
 
 
-def run(argv: list[str], capsys: pytest.CaptureFixture[str]) -> tuple[int, str, str]:
-    """``raytrad.cli.main(argv)`` in-process: (exit status, stdout, stderr)."""
-    try:
-        status = main(argv)
-    except SystemExit as exc:  # argparse errors
-        status = exc.code if isinstance(exc.code, int) else 1
-    captured = capsys.readouterr()
-    return status, captured.out, captured.err
-
-
 # --------------------------------------------------------------------------------------
 # Fixtures
 # --------------------------------------------------------------------------------------
@@ -209,7 +188,7 @@ def test_one_lightmap_per_object_covering_exactly_its_triangles(
 ) -> None:
     prepared, _, lightmaps = per_mesh
     rows = _object_rows(prepared)
-    assert sorted(rows) == sorted(OBJECTS)
+    assert sorted(rows) == sorted(CORNELL_OBJECTS)
     assert [m.name for m in lightmaps] == list(rows)  # the scene's object order
     for lightmap in lightmaps:
         assert lightmap.triangles is not None
@@ -255,7 +234,7 @@ def test_per_mesh_generated_atlases_meet_the_texel_density(cornell_solved: Solve
     density = 150.0
     settings = LightmapSettings(texel_density=density, per_mesh=True)
     lightmaps = api._bake_lightmaps(prepared, result.radiosity, settings)
-    assert len(lightmaps) == len(OBJECTS)
+    assert len(lightmaps) == len(CORNELL_OBJECTS)
     mesh = prepared.mesh
     for lightmap in lightmaps:
         assert lightmap.triangles is not None
@@ -480,7 +459,7 @@ def test_per_mesh_render_writes_one_lightmap_file_per_object(
 ) -> None:
     out, outcome = per_mesh_render
     names = set(outcome.prepared.scene.object_names)
-    assert names == set(OBJECTS)
+    assert names == set(CORNELL_OBJECTS)
     assert "lightmap" not in outcome.outputs
     for name in names:
         exr = out / f"cornell-box-uv.{name}.lightmap.exr"
@@ -512,7 +491,7 @@ def test_per_mesh_report_matches_the_schema(
     errors = sorted(validator.iter_errors(report), key=lambda e: list(e.absolute_path))
     assert not errors, "\n".join(f"{list(e.absolute_path)}: {e.message}" for e in errors[:10])
     keys = {k for k in report["outputs"] if k.startswith("lightmap:")}
-    assert keys == {f"lightmap:{name}" for name in OBJECTS}
+    assert keys == {f"lightmap:{name}" for name in CORNELL_OBJECTS}
     assert report["settings"]["lightmap"]["per_mesh"] is True
     assert report["settings"]["lightmap"]["uv_set"] == "auto"
     # an unknown key is still refused: the pattern does not open the object up
@@ -529,7 +508,7 @@ def test_per_mesh_gltf_has_one_textured_node_per_object(
     path = out / "cornell-box-uv.glb"
     assert outcome.outputs["gltf"] == path
     loaded = trimesh.load(path, process=False)
-    assert set(loaded.graph.nodes_geometry) == set(OBJECTS)
+    assert set(loaded.graph.nodes_geometry) == set(CORNELL_OBJECTS)
     for node in loaded.graph.nodes_geometry:
         _, geometry_name = loaded.graph[node]
         geometry = loaded.geometry[geometry_name]
@@ -540,7 +519,7 @@ def test_per_mesh_gltf_has_one_textured_node_per_object(
     header = _glb_json(path)
     nodes = header["nodes"]
     assert [n["name"] for n in nodes] == list(outcome.prepared.scene.object_names)
-    assert len(header["images"]) == len(OBJECTS)
+    assert len(header["images"]) == len(CORNELL_OBJECTS)
     textures = set()
     triangles = 0
     for node in nodes:
@@ -551,7 +530,7 @@ def test_per_mesh_gltf_has_one_textured_node_per_object(
         assert material["emissiveTexture"]["texCoord"] == 1
         textures.add(material["emissiveTexture"]["index"])
         triangles += header["accessors"][primitive["indices"]]["count"] // 3
-    assert len(textures) == len(OBJECTS)  # each object shows its own lightmap
+    assert len(textures) == len(CORNELL_OBJECTS)  # each object shows its own lightmap
     assert triangles == outcome.report["statistics"]["triangles"]
 
 
@@ -743,7 +722,9 @@ def test_lightmap_options_need_lightmap(
     tmp_path: Path, capsys: pytest.CaptureFixture[str], options: list[str]
 ) -> None:
     out = tmp_path / "out"
-    status, stdout, err = run(["render", str(CORNELL_UV), "-o", str(out), *options, *SMALL], capsys)
+    status, stdout, err = run_cli(
+        ["render", str(CORNELL_UV), "-o", str(out), *options, *SMALL], capsys
+    )
     assert status != 0
     lines = err.strip().splitlines()
     assert len(lines) == 1, err
@@ -757,7 +738,7 @@ def test_bad_uv_set_values_are_refused(
     tmp_path: Path, capsys: pytest.CaptureFixture[str], value: str
 ) -> None:
     out = tmp_path / "out"
-    status, _, err = run(
+    status, _, err = run_cli(
         ["render", str(CORNELL_UV), "-o", str(out), "--lightmap", "--uv-set", value, *SMALL],
         capsys,
     )
@@ -771,7 +752,7 @@ def test_superscript_uv_set_is_a_one_line_error(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     out = tmp_path / "out"
-    status, _, err = run(
+    status, _, err = run_cli(
         ["render", str(CORNELL_UV), "-o", str(out), "--lightmap", "--uv-set", "²", *SMALL],
         capsys,
     )
@@ -781,7 +762,7 @@ def test_superscript_uv_set_is_a_one_line_error(
 
 def test_cli_per_mesh_with_model_uvs(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     out = tmp_path / "out"
-    status, _, err = run(
+    status, _, err = run_cli(
         [
             "render",
             str(CORNELL_UV),
@@ -801,7 +782,7 @@ def test_cli_per_mesh_with_model_uvs(tmp_path: Path, capsys: pytest.CaptureFixtu
     report = json.loads((out / "report.json").read_text())
     assert report["settings"]["lightmap"]["uv_set"] == 1
     assert report["settings"]["lightmap"]["per_mesh"] is True
-    for name in OBJECTS:
+    for name in CORNELL_OBJECTS:
         assert read_image(out / f"cornell-box-uv.{name}.lightmap.exr").shape[:2] == (32, 32)
 
 
@@ -810,7 +791,7 @@ def test_cli_explicit_uv_set_missing_is_one_line(
 ) -> None:
     out = tmp_path / "out"
     obj = SCENES / "cornell-box.obj"
-    status, _, err = run(
+    status, _, err = run_cli(
         ["render", str(obj), "-o", str(out), "--lightmap", "--uv-set", "1", *SMALL], capsys
     )
     assert status == 1

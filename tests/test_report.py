@@ -18,7 +18,7 @@ from raytrad.cli import main
 from raytrad.scene import make_scene
 from raytrad.scenes import furnace_box, write_obj
 
-from .conftest import REPOSITORY, SCENES
+from .conftest import REPOSITORY, SCENES, run_cli
 
 SCHEMA_PATH = REPOSITORY / "docs" / "report.schema.json"
 FURNACE_OBJ = SCENES / "furnace.obj"  # unit cube, Kd 0.5, Ke 1: B = 2 everywhere
@@ -35,16 +35,6 @@ COLUMNS = (
     "true_rms",
     "true_max",
 )
-
-
-def run(argv: list[str], capsys: pytest.CaptureFixture[str]) -> tuple[int, str, str]:
-    """``raytrad.cli.main(argv)`` in-process: (exit status, stdout, stderr)."""
-    try:
-        status = main(argv)
-    except SystemExit as exc:
-        status = exc.code if isinstance(exc.code, int) else 1
-    captured = capsys.readouterr()
-    return status, captured.out, captured.err
 
 
 def _strict_constant(name: str) -> float:
@@ -269,7 +259,7 @@ def test_render_without_plot_imports_neither_matplotlib_nor_colour(tmp_path: Pat
 
 
 def _refused(argv: list[str], out: Path, capsys: pytest.CaptureFixture[str]) -> str:
-    status, stdout, err = run(argv, capsys)
+    status, stdout, err = run_cli(argv, capsys)
     assert status == 1, err
     lines = err.strip().splitlines()
     assert len(lines) == 1, err

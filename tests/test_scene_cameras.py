@@ -14,7 +14,6 @@ import pytest
 
 from raytrad import api
 from raytrad.camera import Camera, NamedCamera
-from raytrad.cli import main
 from raytrad.errors import SettingsError
 from raytrad.image import framing_camera, render_radiance
 from raytrad.io import gltf_camera
@@ -24,7 +23,7 @@ from raytrad.io.loaders import load_scene
 from raytrad.mesh import MeshSettings, build_mesh, fill_hidden
 from raytrad.scenes import CORNELL_CAMERA, cornell_box, write_glb
 
-from .conftest import REPOSITORY, SCENES
+from .conftest import CORNELL_OBJECTS, REPOSITORY, SCENES, run_cli
 
 MESH = MeshSettings(receivers=500, patches=60)
 CORNELL_UV = SCENES / "cornell-box-uv.glb"
@@ -34,26 +33,6 @@ SCHEMA_PATH = REPOSITORY / "docs" / "report.schema.json"
 SMALL = ["--receivers", "500", "--patches", "60", "-q"]
 #: The "corner" camera of cornell-box-uv.glb (tools/make_scenes.py).
 CORNER = Camera((0.5, 0.45, 0.05), (0.1, 0.1, 0.5), vertical_fov_deg=50.0)
-OBJECTS = (
-    "floor",
-    "ceiling",
-    "back-wall",
-    "right-wall",
-    "left-wall",
-    "light",
-    "short-block",
-    "tall-block",
-)
-
-
-def run(argv: list[str], capsys: pytest.CaptureFixture[str]) -> tuple[int, str, str]:
-    """``raytrad.cli.main(argv)`` in-process: (exit status, stdout, stderr)."""
-    try:
-        status = main(argv)
-    except SystemExit as exc:  # argparse errors
-        status = exc.code if isinstance(exc.code, int) else 1
-    captured = capsys.readouterr()
-    return status, captured.out, captured.err
 
 
 def _assert_same_camera(got: Camera, expected: Camera, atol: float = 1e-6) -> None:
@@ -84,15 +63,15 @@ def _render(
 
 def test_cornell_box_has_eight_named_objects() -> None:
     scene = cornell_box()
-    assert tuple(scene.object_names) == OBJECTS
-    counts = np.bincount(scene.object_index, minlength=len(OBJECTS))
+    assert tuple(scene.object_names) == CORNELL_OBJECTS
+    counts = np.bincount(scene.object_index, minlength=len(CORNELL_OBJECTS))
     # six quads (two triangles) and two blocks of five quads
     np.testing.assert_array_equal(counts, [2, 2, 2, 2, 2, 2, 10, 10])
     emitting = (scene.emitted_exitance > 0).any(axis=1)
-    np.testing.assert_array_equal(emitting, scene.object_index == OBJECTS.index("light"))
+    np.testing.assert_array_equal(emitting, scene.object_index == CORNELL_OBJECTS.index("light"))
     # the blocks stand on the floor (y = 0) and reach up to their tops
     for block, top in (("short-block", 0.165), ("tall-block", 0.33)):
-        corners = scene.triangle_vertices()[scene.object_index == OBJECTS.index(block)]
+        corners = scene.triangle_vertices()[scene.object_index == CORNELL_OBJECTS.index(block)]
         assert corners[..., 1].min() == pytest.approx(0.0, abs=1e-9)
         assert corners[..., 1].max() == pytest.approx(top, abs=1e-9)
 
@@ -100,8 +79,8 @@ def test_cornell_box_has_eight_named_objects() -> None:
 def test_bundled_uv_scene_is_the_cornell_box_with_two_cameras() -> None:
     scene = load_scene(CORNELL_UV, uv_set=1)
     box = cornell_box()
-    assert set(scene.object_names) == set(OBJECTS)
-    for name in OBJECTS:
+    assert set(scene.object_names) == set(CORNELL_OBJECTS)
+    for name in CORNELL_OBJECTS:
         mine = scene.triangle_vertices()[scene.object_index == scene.object_names.index(name)]
         theirs = box.triangle_vertices()[box.object_index == box.object_names.index(name)]
         assert len(mine) == len(theirs), name
@@ -175,7 +154,7 @@ def test_write_glb_keeps_several_cameras_and_the_geometry(tmp_path: Path) -> Non
     # camera nodes add no geometry; each object is one node
     scene = load_scene(path)
     assert scene.triangle_count == box.triangle_count
-    assert set(scene.object_names) == set(OBJECTS)
+    assert set(scene.object_names) == set(CORNELL_OBJECTS)
     assert np.allclose(np.sort(scene.positions.ravel()), np.sort(box.positions.ravel()), atol=1e-6)
 
 
@@ -390,7 +369,7 @@ def test_render_settings_camera_is_named_settings(tmp_path: Path) -> None:
 
 def test_view_without_image_is_an_error(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     out = tmp_path / "out"
-    status, stdout, err = run(
+    status, stdout, err = run_cli(
         ["render", str(CORNELL_UV), "-o", str(out), "--view", "x", *SMALL], capsys
     )
     assert status != 0
@@ -415,7 +394,7 @@ def test_bad_view_is_one_line(
     words: list[str],
 ) -> None:
     out = tmp_path / "out"
-    status, _, err = run(
+    status, _, err = run_cli(
         ["render", str(scene), "-o", str(out), "--image", "--view", view, *SMALL], capsys
     )
     assert status == 1
@@ -428,7 +407,7 @@ def test_bad_view_is_one_line(
 
 def test_cli_view_sets_camera_and_width(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     out = tmp_path / "out"
-    status, _, err = run(
+    status, _, err = run_cli(
         [
             "render",
             str(CORNELL_UV),
