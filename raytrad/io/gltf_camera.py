@@ -17,7 +17,6 @@ import json
 import logging
 import math
 import os
-import struct
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
@@ -26,11 +25,10 @@ import numpy as np
 
 from raytrad.camera import Camera, NamedCamera
 from raytrad.errors import SceneError, SettingsError
+from raytrad.io.loaders import _GLB_MAGIC, _reason, _split_glb, checked_path
 
 log = logging.getLogger(__name__)
 
-_GLB_MAGIC = b"glTF"
-_GLB_JSON = 0x4E4F534A
 _LOCAL_FORWARD = np.array([0.0, 0.0, -1.0])
 _LOCAL_UP = np.array([0.0, 1.0, 0.0])
 _PARALLEL_TOLERANCE = 1e-9
@@ -64,7 +62,7 @@ def read_gltf_cameras(path: str | os.PathLike[str], scale: float = 1.0) -> list[
     SettingsError
         If ``scale`` is not a finite positive number.
     """
-    path, scale = _checked(path, scale)
+    path, scale = checked_path(path, scale)
     document = _read_document(path)
     nodes = _objects(path, document, "nodes")
     if not any("camera" in node for node in nodes):
@@ -82,17 +80,6 @@ def read_gltf_cameras(path: str | os.PathLike[str], scale: float = 1.0) -> list[
 # --------------------------------------------------------------------------- the document
 
 
-def _checked(path: str | os.PathLike[str], scale: float) -> tuple[Path, float]:
-    """The path as a Path and the scale as a float, or the error naming the bad one."""
-    path = Path(path)
-    scale = float(scale)
-    if not (math.isfinite(scale) and scale > 0.0):
-        raise SettingsError(f"scale must be a finite number > 0, not {scale}")
-    if not path.is_file():
-        raise SceneError(path, "file not found" if not path.exists() else "not a regular file")
-    return path, scale
-
-
 def _read_document(path: Path) -> dict[str, Any]:
     """The top-level JSON object of a ``.gltf`` or ``.glb`` file, checked to be glTF 2.0."""
     try:
@@ -100,11 +87,11 @@ def _read_document(path: Path) -> dict[str, Any]:
     except OSError as exc:
         raise SceneError(path, f"cannot read the file: {exc.strerror or exc}") from exc
     binary = path.suffix.lower() == ".glb" or data[:4] == _GLB_MAGIC
-    text = _glb_json_chunk(path, data) if binary else data
+    text = _split_glb(path, data)[0].rstrip(b" \0") if binary else data
     try:
         document = json.loads(text.decode("utf-8-sig"))
     except (ValueError, RecursionError) as exc:  # JSONDecodeError, UnicodeDecodeError
-        raise SceneError(path, f"cannot parse as glTF: {_cut(str(exc))}") from None
+        raise SceneError(path, f"cannot parse as glTF: {_reason(exc)}") from None
     if not isinstance(document, dict):
         raise SceneError(path, "not a glTF file: the JSON is not an object")
     asset = document.get("asset")
@@ -113,21 +100,6 @@ def _read_document(path: Path) -> dict[str, Any]:
     if not asset["version"].startswith("2."):
         raise SceneError(path, f"glTF version {_short(asset['version'])}, need 2.0")
     return document
-
-
-def _glb_json_chunk(path: Path, data: bytes) -> bytes:
-    """The bytes of a GLB container's first (JSON) chunk, padding removed."""
-    if len(data) < 20 or data[:4] != _GLB_MAGIC:
-        raise SceneError(path, "cannot parse as GLB: not a binary glTF file (bad magic)")
-    _, version, length = struct.unpack_from("<4sII", data, 0)
-    if version != 2:
-        raise SceneError(path, f"cannot parse as GLB: glTF version {version}, need 2")
-    chunk_length, chunk_type = struct.unpack_from("<II", data, 12)
-    if length > len(data) or 20 + chunk_length > length:
-        raise SceneError(path, f"cannot parse as GLB: truncated ({len(data)} of {length} bytes)")
-    if chunk_type != _GLB_JSON:
-        raise SceneError(path, "cannot parse as GLB: the first chunk is not JSON")
-    return data[20 : 20 + chunk_length].rstrip(b" \0")
 
 
 def _objects(path: Path, document: dict[str, Any], key: str) -> list[dict[str, Any]]:
@@ -141,15 +113,10 @@ def _objects(path: Path, document: dict[str, Any], key: str) -> list[dict[str, A
     return items
 
 
-def _cut(text: str, limit: int = 160) -> str:
-    """One line of at most ``limit`` characters, for error messages."""
-    text = " ".join(text.split())
-    return text if len(text) <= limit else text[: limit - 3] + "..."
-
-
 def _short(value: object) -> str:
-    """``repr(value)`` cut short, for error messages."""
-    return _cut(repr(value), 60)
+    """``repr(value)`` on one line, cut to 60 characters, for error messages."""
+    text = " ".join(repr(value).split())
+    return text if len(text) <= 60 else text[:57] + "..."
 
 
 def _index(path: Path, value: object, count: int, what: str) -> int:
