@@ -309,6 +309,14 @@ class _Override:
     emission: _Emission | None = None
 
 
+def _parse_materials(key: _Key, value: Any) -> dict[str, _Override]:
+    """A table of material tables by name (``[materials]``, ``[mesh.materials]``)."""
+    return {
+        name: _parse_material(key / name, spec)
+        for name, spec in _table(key, value, _any_name(value)).items()
+    }
+
+
 def _parse_material(key: _Key, value: Any) -> _Override:
     """A ``[materials.NAME]`` or ``[mesh.materials.NAME]`` table."""
     table = _table(key, value, MATERIAL_KEYS)
@@ -493,12 +501,7 @@ def _parse_mesh(
     table = _table(key, value, MESH_KEYS)
     world_from_file = _parse_transform(key, table)
     overrides_key = key / "materials"
-    overrides = {
-        name: _parse_material(overrides_key / name, spec)
-        for name, spec in _table(
-            overrides_key, table.get("materials", {}), _any_name(table.get("materials"))
-        ).items()
-    }
+    overrides = _parse_materials(overrides_key, table.get("materials", {}))
     mesh_path, mesh = _load_mesh(key, table, uv_set)
     object_names = _object_names(key, table, mesh_path, mesh, taken)
     names = set(mesh.material_names)
@@ -643,12 +646,7 @@ def _parse(path: Path, uv_set: int | None = None) -> _Parsed:
     root = _Key(path)
     document = _table(root, _read_toml(path), TOP_KEYS)
     materials_key = root / "materials"
-    shared = {
-        name: _parse_material(materials_key / name, spec)
-        for name, spec in _table(
-            materials_key, document.get("materials", {}), _any_name(document.get("materials"))
-        ).items()
-    }
+    shared = _parse_materials(materials_key, document.get("materials", {}))
     meshes = _required(root, document, "mesh")
     if not isinstance(meshes, list) or not meshes:
         raise (root / "mesh").error("expected one or more [[mesh]] tables")
