@@ -201,7 +201,7 @@ def lightmap_uvs(
         return uvs[new_triangles] * np.asarray(size, dtype=np.float64), size
     if source_corners is None:
         raise ValueError("existing lightmap UVs need the scene triangle corners to map through")
-    unit_uv = transfer_uvs(mesh, existing_uv, source_corners)[rows]
+    unit_uv = transfer_uvs(mesh, existing_uv, source_corners, rows)
     if settings.texel_density is None:
         side = settings.resolution
     else:
@@ -216,7 +216,10 @@ def lightmap_uvs(
 
 
 def transfer_uvs(
-    mesh: RadiosityMesh, existing_uv: np.ndarray, source_corners: np.ndarray
+    mesh: RadiosityMesh,
+    existing_uv: np.ndarray,
+    source_corners: np.ndarray,
+    triangles: np.ndarray | None = None,
 ) -> np.ndarray:
     """Per-corner UVs of the refined mesh, interpolated from those of the scene triangles.
 
@@ -227,11 +230,14 @@ def transfer_uvs(
         UV of each corner of each scene triangle [1].
     source_corners : (S, 3, 3) float
         Corner positions of the scene triangles [m].
+    triangles : (t,) int or None
+        Only these refined triangles; None: all.
 
     Returns
     -------
     (T, 3, 2) float64
-        UV of each corner of each refined triangle [1] (same units as ``existing_uv``).
+        UV of each corner of each refined triangle [1] (same units as ``existing_uv``);
+        ``t`` rows with ``triangles``.
 
     Raises
     ------
@@ -247,14 +253,15 @@ def transfer_uvs(
         raise ValueError(
             f"source corners {source_corners.shape} do not match UVs {existing_uv.shape}"
         )
-    source = mesh.triangle_source
+    rows = slice(None) if triangles is None else np.asarray(triangles)
+    source = mesh.triangle_source[rows]
     uv = existing_uv[source]
     if not np.isfinite(uv).all():
         raise SceneError(None, "the lightmap UV set has non-finite coordinates")
     if (uv < 0.0).any() or (uv > 1.0).any():
         log.warning("lightmap UVs outside [0, 1]: those texels are left out of the atlas")
     corners = source_corners[source]  # (T, 3, 3)
-    points = mesh.positions[mesh.triangles]  # (T, 3, 3)
+    points = mesh.positions[mesh.triangles[rows]]  # (T, 3, 3)
     e0 = corners[:, 1] - corners[:, 0]
     e1 = corners[:, 2] - corners[:, 0]
     rel = points - corners[:, :1]
@@ -651,7 +658,7 @@ def bake_lightmap(
     uv, size = lightmap_uvs(mesh, settings, existing_uv, source_corners, rows)
     priority = None
     if existing_uv is not None and source_corners is not None:
-        priority = _back_copies(mesh, np.asarray(source_corners, dtype=np.float64))[rows]
+        priority = _back_copies(mesh, np.asarray(source_corners, dtype=np.float64), rows)
     values = radiosity[mesh.triangle_receivers[rows]]
     counts = np.zeros(size[0] * size[1], dtype=np.int64)
     pixels, coverage = rasterize(uv, values, size, priority, counts)
@@ -689,11 +696,14 @@ def bake_lightmap(
     )
 
 
-def _back_copies(mesh: RadiosityMesh, source_corners: np.ndarray) -> np.ndarray:
-    """(T,) int64: 1 for reversed copies of double-sided faces, 0 for the originals."""
-    corners = source_corners[mesh.triangle_source]
+def _back_copies(
+    mesh: RadiosityMesh, source_corners: np.ndarray, triangles: np.ndarray
+) -> np.ndarray:
+    """(t,) int64: 1 for reversed copies of double-sided faces among ``triangles``, else 0."""
+    corners = source_corners[mesh.triangle_source[triangles]]
     facing = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
-    return (np.einsum("ti,ti->t", facing, mesh.triangle_normal) < 0).astype(np.int64)
+    normal = mesh.triangle_normal[triangles]
+    return (np.einsum("ti,ti->t", facing, normal) < 0).astype(np.int64)
 
 
 def lightmap_vertices(
