@@ -30,7 +30,7 @@ from raytrad.errors import RaytradError, SceneError, SettingsError
 from raytrad.formfactor import RAY_OFFSET, FormFactorEngine, receiver_points
 from raytrad.image import automatic_camera, render_radiance
 from raytrad.io.atomic import atomic_write
-from raytrad.io.exr import TONEMAPS, display_encode, encode_png, write_exr, write_png
+from raytrad.io.exr import TONEMAPS, display_encode, write_exr, write_png
 from raytrad.io.gltf import BakedPart, write_baked_glb
 from raytrad.io.loaders import load_scene
 from raytrad.io.ply import write_radiosity_ply
@@ -38,7 +38,6 @@ from raytrad.lightmap import (
     Lightmap,
     LightmapSettings,
     bake_lightmap,
-    lightmap_preview,
     lightmap_vertices,
     write_lightmap,
     write_lightmap_preview,
@@ -498,9 +497,10 @@ def _write_outputs(
     )
     metadata = {"scene": str(prepared.scene.source or stem), "method": result.method}
     lightmaps: list[Lightmap] = []
+    previews: list[Path] = []
     if settings.lightmap is not None:
         lightmaps = _bake_lightmaps(prepared, shown, settings.lightmap)
-        _write_lightmaps(lightmaps, output_dir, stem, metadata, exposure, outputs, facts)
+        previews = _write_lightmaps(lightmaps, output_dir, stem, metadata, exposure, outputs, facts)
     if settings.image is not None:
         view, width = _image_view(mesh, settings.image, camera)
         image = settings.image
@@ -524,7 +524,8 @@ def _write_outputs(
         )
     if settings.gltf:
         outputs["gltf"] = output_dir / f"{stem}.glb"
-        _write_gltf(outputs["gltf"], prepared, shown, exposure, lightmaps)
+        pngs = [preview.read_bytes() for preview in previews]  # the PNGs just written
+        _write_gltf(outputs["gltf"], prepared, shown, exposure, lightmaps, pngs)
     return outputs, facts
 
 
@@ -534,12 +535,13 @@ def _write_gltf(
     radiosity: np.ndarray,
     exposure: float,
     lightmaps: list[Lightmap],
+    pngs: list[bytes],
 ) -> None:
-    """The baked model: one node per object, with its lightmap when one was baked."""
+    """The baked model: one node per object, with its lightmap (``pngs``: each
+    lightmap's preview PNG, in order) when one was baked."""
     mesh = prepared.mesh
     colour = radiosity / np.pi * exposure
     parts = []
-    pngs = [encode_png(lightmap_preview(lightmap, exposure)) for lightmap in lightmaps]
     by_name = {lightmap.name: k for k, lightmap in enumerate(lightmaps)}
     for name, rows in _object_triangles(prepared):
         uv, png = None, None
@@ -629,11 +631,12 @@ def _write_lightmaps(
     exposure: float,
     outputs: dict[str, Path],
     facts: dict[str, Any],
-) -> None:
+) -> list[Path]:
     """Write each lightmap's EXR and preview PNG; record paths and statistics.
 
     One scene lightmap is ``<stem>.lightmap.exr``; per-mesh ones are
-    ``<stem>.<object>.lightmap.exr`` under output keys ``lightmap:<object>``.
+    ``<stem>.<object>.lightmap.exr`` under output keys ``lightmap:<object>``. Returns the
+    preview PNGs, in lightmap order.
     """
     if len(lightmaps) == 1 and not lightmaps[0].name:
         lightmap = lightmaps[0]
@@ -642,14 +645,17 @@ def _write_lightmaps(
         write_lightmap(outputs["lightmap"], lightmap, metadata)
         write_lightmap_preview(outputs["lightmap_preview"], lightmap, exposure)
         facts["lightmap"] = {"size": list(lightmap.size), **lightmap.stats}
-        return
+        return [outputs["lightmap_preview"]]
     facts["lightmaps"] = {}
+    previews = []
     for lightmap, safe in zip(lightmaps, _file_names([m.name for m in lightmaps]), strict=True):
         exr = outputs[f"lightmap:{lightmap.name}"] = output_dir / f"{stem}.{safe}.lightmap.exr"
         png = outputs[f"lightmap_preview:{lightmap.name}"] = exr.with_suffix(".png")
         write_lightmap(exr, lightmap, {**metadata, "object": lightmap.name})
         write_lightmap_preview(png, lightmap, exposure)
         facts["lightmaps"][lightmap.name] = {"size": list(lightmap.size), **lightmap.stats}
+        previews.append(png)
+    return previews
 
 
 def build_report(
