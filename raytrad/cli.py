@@ -13,19 +13,20 @@ from pathlib import Path
 from types import FrameType
 from typing import Any
 
-from raytrad import __version__
-from raytrad.convergence import eta_seconds
-from raytrad.errors import RaytradError, SettingsError
-from raytrad.mesh import MeshSettings
-from raytrad.solver import SHOOTING_METHODS, SolverState, SolveSettings
+from raytrad import __version__, api
+from raytrad.settings import (
+    Camera,
+    ImageSettings,
+    LightmapSettings,
+    MeshSettings,
+    RenderSettings,
+    SettingsError,
+    SolveSettings,
+    defaults,
+    method_summaries,
+)
 
 log = logging.getLogger("raytrad")
-
-_METHOD_HELP = {
-    "progressive": "plain progressive refinement (Cohen et al. 1988)",
-    "overrelaxation": "progressive refinement shooting omega times the unshot radiosity",
-    "ambient": "ambient overshooting (Feda 1992), the default and usually fastest",
-}
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -47,17 +48,17 @@ def build_parser() -> argparse.ArgumentParser:
     _add_common(render, default_tolerance=1e-3)
     render.add_argument(
         "--method",
-        choices=list(SHOOTING_METHODS),
+        choices=list(method_summaries()),
         default="ambient",
         help=f"solver ({_methods_text()}); default: %(default)s",
     )
     render.add_argument(
         "--exposure",
         type=float,
-        default=0.0,
+        default=None,
         metavar="EV",
         help="brighten the PLY display colours by EV stops on top of the automatic exposure "
-        "(default: %(default)s)",
+        "(default: the scene file's [output] exposure, else 0)",
     )
     outputs = render.add_argument_group(
         "lightmaps, images and glTF (a TOML scene's [output] and [camera] give defaults)"
@@ -73,7 +74,7 @@ def build_parser() -> argparse.ArgumentParser:
         type=int,
         default=None,
         metavar="TEXELS",
-        help="atlas size in texels (default: 1024)",
+        help=f"atlas size in texels (default: {defaults_text('lightmap_resolution')})",
     )
     outputs.add_argument(
         "--texel-density",
@@ -85,7 +86,7 @@ def build_parser() -> argparse.ArgumentParser:
     outputs.add_argument(
         "--lightmap-padding",
         type=int,
-        default=4,
+        default=LightmapSettings().padding,
         metavar="TEXELS",
         help="padding between charts (default: %(default)s)",
     )
@@ -118,13 +119,19 @@ def build_parser() -> argparse.ArgumentParser:
         "--width",
         type=int,
         default=None,
-        help="image width (default: height x the glTF camera's aspect ratio, else 640)",
+        help="image width (default: height x the glTF camera's aspect ratio, else "
+        f"{defaults_text('image_width')})",
     )
-    outputs.add_argument("--height", type=int, default=None, help="image height (default: 480)")
+    outputs.add_argument(
+        "--height",
+        type=int,
+        default=None,
+        help=f"image height (default: {defaults_text('image_height')})",
+    )
     outputs.add_argument(
         "--spp",
         type=int,
-        default=4,
+        default=ImageSettings().samples,
         help="samples per pixel for anti-aliasing (default: %(default)s)",
     )
     outputs.add_argument(
@@ -183,7 +190,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_common(compare, default_tolerance=1e-4)
     compare.add_argument(
         "--methods",
-        default=",".join(SHOOTING_METHODS),
+        default=",".join(method_summaries()),
         help="comma-separated methods (default: %(default)s)",
     )
     compare.add_argument(
@@ -203,14 +210,25 @@ _UNITS = (
 
 
 def _methods_text() -> str:
-    return ", ".join(f"{k}: {_METHOD_HELP.get(k, k)}" for k in SHOOTING_METHODS)
+    return ", ".join(f"{name}: {summary}" for name, summary in method_summaries().items())
+
+
+def defaults_text(name: str) -> str:
+    """A default value of :class:`~raytrad.settings.RenderSettings` and its parts, for help,
+    when a scene file can override it."""
+    return f"the scene file's [output] {name}, else {getattr(defaults, name)}"
 
 
 def _add_common(parser: argparse.ArgumentParser, default_tolerance: float) -> None:
     """Options shared by ``render`` and ``compare``: scene, output, mesh, stopping rules."""
     defaults = MeshSettings()
     add = parser.add_argument
-    add("scene", type=Path, metavar="SCENE", help="scene file: .obj (+.mtl), .gltf, .glb or .ply")
+    add(
+        "scene",
+        type=Path,
+        metavar="SCENE",
+        help="scene file: .obj (+.mtl), .gltf, .glb, .ply or .toml",
+    )
     add(
         "-o",
         "--output",
@@ -300,7 +318,7 @@ def _add_common(parser: argparse.ArgumentParser, default_tolerance: float) -> No
     add(
         "--cache-mb",
         type=float,
-        default=1024.0,
+        default=RenderSettings().cache_mb,
         metavar="MIB",
         help="memory for reusing form factors between shots of a patch (default: %(default)s)",
     )
@@ -315,30 +333,25 @@ class _Progress:
     and the time to the target tolerance extrapolated from the recent decay.
     """
 
-    def __init__(self, enabled: bool, tolerance: float) -> None:
+    def __init__(self, enabled: bool) -> None:
         self._bar: Any = None
         if enabled and sys.stderr.isatty():
             from tqdm import tqdm
 
             self._bar = tqdm(unit="shot", dynamic_ncols=True, file=sys.stderr, mininterval=0.25)
-        self._tolerance = tolerance
-        self._seconds: list[float] = []
-        self._residuals: list[float] = []
         self._last = 0.0
 
-    def __call__(self, state: SolverState, residual: float, estimate: float = math.nan) -> None:
+    def __call__(self, report: api.RenderProgress) -> None:
         if self._bar is None:
             return
-        self._bar.update(state.shots - self._bar.n)
+        self._bar.update(report.shots - self._bar.n)
         now = time.perf_counter()
         if now - self._last > 0.25:
-            self._seconds.append(state.seconds)
-            self._residuals.append(residual)
-            rate = state.rays / state.seconds if state.seconds > 0 else 0.0
-            eta = eta_seconds(self._seconds, self._residuals, self._tolerance)
-            eta_text = f"{eta:.0f}s" if math.isfinite(eta) else "?"
+            rate = report.rays / report.seconds if report.seconds > 0 else 0.0
+            eta_text = f"{report.eta:.0f}s" if math.isfinite(report.eta) else "?"
             self._bar.set_postfix_str(
-                f"residual {residual:.2e}  error~{estimate:.1e}  rays/s {rate:.3g}  ETA {eta_text}"
+                f"residual {report.residual:.2e}  error~{report.estimate:.1e}  "
+                f"rays/s {rate:.3g}  ETA {eta_text}"
             )
             self._last = now
 
@@ -363,21 +376,23 @@ class _StopFlag:
         print("\nraytrad: stopping after this shot (Ctrl-C again to abort)", file=sys.stderr)
 
 
-def _parse_camera(text: str) -> Any:
-    from raytrad.camera import Camera
-
+def _parse_camera(text: str) -> Camera:
     try:
         parts = text.split(":")
         position = tuple(float(v) for v in parts[0].split(","))
         target = tuple(float(v) for v in parts[1].split(","))
-        fov = float(parts[2]) if len(parts) > 2 else 39.3
+        fov = float(parts[2]) if len(parts) > 2 else defaults.vertical_fov_deg
         if len(position) != 3 or len(target) != 3 or len(parts) > 3:
             raise ValueError
     except (ValueError, IndexError):
         raise SettingsError(
             f"--camera wants X,Y,Z:TX,TY,TZ[:FOV] (metres, degrees), got {text!r}"
         ) from None
-    return Camera(position, target, vertical_fov_deg=fov)
+    return Camera(
+        (position[0], position[1], position[2]),
+        (target[0], target[1], target[2]),
+        vertical_fov_deg=fov,
+    )
 
 
 def _uv_set(text: str) -> int | str:
@@ -390,24 +405,12 @@ def _uv_set(text: str) -> int | str:
 
 
 def _output_settings(args: argparse.Namespace) -> dict[str, Any]:
-    """Lightmap, image and glTF settings from the options, over a TOML file's [output]."""
-    from raytrad.api import ImageSettings
-    from raytrad.lightmap import LightmapSettings
-
-    file_output: dict[str, Any] = {}
-    if args.scene.suffix.lower() == ".toml" and args.scene.is_file():
-        from raytrad.io.toml_scene import load_scene_description
-
-        file_output = load_scene_description(args.scene, scale=args.scale).output
-    out: dict[str, Any] = {"gltf": args.gltf}
-    if "exposure" in file_output and args.exposure == 0.0:
-        out["exposure"] = float(file_output["exposure"])
+    """Lightmap, image and glTF settings from the options (None: the scene file's value)."""
+    out: dict[str, Any] = {"gltf": args.gltf, "exposure": args.exposure}
     if args.lightmap or (args.gltf and args.texel_density is not None):
-        density = args.texel_density or file_output.get("texel_density")
-        resolution = args.lightmap_resolution or file_output.get("lightmap_resolution", 1024)
         out["lightmap"] = LightmapSettings(
-            resolution=int(resolution),
-            texel_density=None if density is None else float(density),
+            resolution=args.lightmap_resolution,
+            texel_density=args.texel_density,
             padding=args.lightmap_padding,
             half=not args.lightmap_float,
             uv_set=_uv_set(args.uv_set),
@@ -419,8 +422,8 @@ def _output_settings(args: argparse.Namespace) -> dict[str, Any]:
         raise SettingsError("--view needs --image")
     if args.image:
         out["image"] = ImageSettings(
-            width=args.width or file_output.get("image_width"),
-            height=args.height or int(file_output.get("image_height", 480)),
+            width=args.width,
+            height=args.height,
             samples=args.spp,
             camera=None if args.camera is None else _parse_camera(args.camera),
             view=args.view,
@@ -429,11 +432,9 @@ def _output_settings(args: argparse.Namespace) -> dict[str, Any]:
     return out
 
 
-def _settings(args: argparse.Namespace, method: str) -> Any:
-    from raytrad import api
-
+def _settings(args: argparse.Namespace, method: str) -> RenderSettings:
     extra = _output_settings(args) if args.command == "render" else {}
-    return api.RenderSettings(
+    return RenderSettings(
         mesh=MeshSettings(
             max_edge=args.max_edge,
             receivers=args.receivers,
@@ -451,30 +452,27 @@ def _settings(args: argparse.Namespace, method: str) -> Any:
             omega=args.omega,
         ),
         scale=args.scale,
-        exposure=extra.pop("exposure", getattr(args, "exposure", 0.0)),
         cache_mb=args.cache_mb,
         **extra,
     )
 
 
 def _compare(args: argparse.Namespace) -> int:
-    from raytrad.compare import compare, markdown_table
-
     methods = [m.strip() for m in args.methods.split(",") if m.strip()]
-    summary = compare(args.scene, args.output, methods, _settings(args, "ambient"), args.reference)
+    summary = api.compare(
+        args.scene, args.output, methods, _settings(args, "ambient"), args.reference
+    )
     if not args.quiet:
         ref = summary["reference"]
         print(f"reference: {ref['kind']} ({ref['description']})")
-        print(markdown_table(summary["table"]), end="")
+        print(api.comparison_table(summary), end="")
         print(f"wrote      {args.output / 'compare.md'}, compare.json, compare.png")
     return 0
 
 
 def _render(args: argparse.Namespace) -> int:
-    from raytrad import api
-
     settings = _settings(args, args.method)
-    progress = _Progress(enabled=not args.quiet, tolerance=args.tolerance)
+    progress = _Progress(enabled=not args.quiet)
     stop = _StopFlag()
     previous = signal.signal(signal.SIGINT, stop.handler)
     try:
@@ -542,7 +540,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             return _render(args)
         if args.command == "compare":
             return _compare(args)
-    except RaytradError as exc:
+    except api.RaytradError as exc:
         print(f"raytrad: error: {exc}", file=sys.stderr)
         return 1
     except OSError as exc:  # unwritable output directory, full disk, ...

@@ -12,12 +12,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from raytrad import api
-from raytrad.mesh import MeshSettings
-from raytrad.reference import dense_solve
-from raytrad.scene import Scene, make_scene
-from raytrad.scenes import cornell_box, furnace_box
-from raytrad.solver import SolveResult, SolveSettings, solve
+from raytrad.core.mesh import MeshSettings
+from raytrad.core.pipeline import Prepared, prepare
+from raytrad.core.reference import dense_solve
+from raytrad.core.solver import SolveResult, SolveSettings, solve
+from raytrad.scene import Scene, make_scene, triangle_areas_normals
+from raytrad.scene.builder import quads_scene
+from raytrad.scene.builtin import cornell_box, furnace_box
 
 REPOSITORY = Path(__file__).resolve().parents[1]
 SCENES = REPOSITORY / "scenes"
@@ -52,49 +53,63 @@ FURNACE_MESH = MeshSettings(receivers=1500, patches=100)
 #: The Cornell box small enough for a dense reference solve in about a second.
 CORNELL_MESH = MeshSettings(receivers=2000, patches=100)
 
-Material = tuple[Sequence[float] | float, Sequence[float] | float, bool]
-"""(reflectance [1], emitted exitance [W m-2], double-sided); scalars mean grey."""
-
-
-def quads_scene(
-    quads: Sequence[Sequence[Sequence[float]]],
-    materials: dict[str, Material] | None = None,
-    quad_material: Sequence[str] | None = None,
-) -> Scene:
-    """A scene of planar quads, each with its own four vertices, split along corners 0-2.
-
-    Parameters
-    ----------
-    quads : (Q, 4, 3) float
-        Corners [m], counter-clockwise seen from the front (lit) side.
-    materials : dict
-        name -> (reflectance, emitted exitance, double-sided); default one grey ``"grey"``
-        of reflectance 0.5 that does not emit.
-    quad_material : (Q,) sequence of str
-        Material of each quad; default the first material for all.
-    """
-    materials = materials or {"grey": (0.5, 0.0, False)}
-    names = list(materials)
-    quad_material = quad_material or [names[0]] * len(quads)
-    corners = np.asarray(quads, dtype=np.float64).reshape(-1, 4, 3)
-    triangles = 4 * np.arange(len(corners))[:, None, None] + np.array([[0, 1, 2], [0, 2, 3]])
-    index = np.array([names.index(name) for name in quad_material])
-    return make_scene(
-        positions=corners.reshape(-1, 3),
-        triangles=triangles.reshape(-1, 3),
-        material_index=np.repeat(index, 2),
-        material_names=names,
-        material_reflectance=[np.broadcast_to(materials[n][0], 3) for n in names],
-        material_emitted_exitance=[np.broadcast_to(materials[n][1], 3) for n in names],
-        material_double_sided=[materials[n][2] for n in names],
-    )
-
 
 def one_quad_scene(
     corners: Sequence[Sequence[float]], reflectance: float = 0.5, emitted_exitance: float = 0.0
 ) -> Scene:
     """A single one-sided quad (two triangles) of one grey material."""
     return quads_scene([corners], {"grey": (reflectance, emitted_exitance, False)})
+
+
+def triangle_soup(
+    corners: np.ndarray,
+    uv: np.ndarray | None,
+    object_index: Sequence[int] | None = None,
+    object_names: Sequence[str] | None = None,
+) -> Scene:
+    """A scene of triangles with their own three vertices each, one grey material.
+
+    Parameters
+    ----------
+    corners : (T, 3, 3) float
+        Corner positions [m], counter-clockwise from the front side.
+    uv : (T, 3, 2) float or None
+        Corner lightmap UVs.
+    object_index : (T,) int or None
+        Object of each triangle; default one object per triangle, named ``t<i>``.
+    """
+    corners = np.asarray(corners, dtype=np.float64)
+    count = len(corners)
+    if object_index is None:
+        object_index = range(count)
+        object_names = [f"t{i}" for i in range(count)]
+    return make_scene(
+        positions=corners.reshape(-1, 3),
+        triangles=np.arange(3 * count).reshape(-1, 3),
+        material_index=np.zeros(count, dtype=np.int64),
+        material_names=["grey"],
+        material_reflectance=[[0.5, 0.5, 0.5]],
+        material_emitted_exitance=[[0.0, 0.0, 0.0]],
+        object_index=np.asarray(object_index),
+        object_names=object_names,
+        lightmap_uv=uv,
+    )
+
+
+def uv_at_corner(corners: np.ndarray, uv: np.ndarray, point: np.ndarray) -> np.ndarray:
+    """The UV recorded for ``point`` among one triangle's (3, 3) corners and (3, 2) UVs."""
+    at = np.nonzero(np.abs(corners - point).max(axis=1) < 1e-12)[0]
+    assert len(at) == 1
+    return uv[at[0]]
+
+
+def areas_by_material(scene: Scene) -> dict[str, float]:
+    """Total area [m2] of each material's faces, computed from the corners."""
+    areas, _ = triangle_areas_normals(scene.triangle_vertices())
+    return {
+        name: float(areas[scene.material_index == i].sum())
+        for i, name in enumerate(scene.material_names)
+    }
 
 
 @pytest.fixture
@@ -110,52 +125,50 @@ def make_one_quad() -> Callable[..., Scene]:
 
 
 @pytest.fixture
-def prepare_scene() -> Iterator[Callable[..., api.Prepared]]:
+def prepare_scene() -> Iterator[Callable[..., Prepared]]:
     """Factory ``prepare_scene(scene, mesh_settings)`` -> Prepared, closed after the test."""
-    opened: list[api.Prepared] = []
+    opened: list[Prepared] = []
 
-    def prepare(scene: Scene, mesh: MeshSettings = FURNACE_MESH) -> api.Prepared:
-        prepared = api.prepare(scene, api.RenderSettings(mesh=mesh))
+    def make(scene: Scene, mesh: MeshSettings = FURNACE_MESH) -> Prepared:
+        prepared = prepare(scene, mesh)
         opened.append(prepared)
         return prepared
 
-    yield prepare
+    yield make
     for prepared in opened:
         prepared.close()
 
 
 @pytest.fixture
 def prepare_furnace(
-    prepare_scene: Callable[..., api.Prepared],
-) -> Callable[..., api.Prepared]:
+    prepare_scene: Callable[..., Prepared],
+) -> Callable[..., Prepared]:
     """Factory ``prepare_furnace(reflectance=0.5, emitted_exitance=1.0)`` -> Prepared."""
 
-    def prepare(reflectance: float = 0.5, emitted_exitance: float = 1.0) -> api.Prepared:
+    def make(reflectance: float = 0.5, emitted_exitance: float = 1.0) -> Prepared:
         return prepare_scene(furnace_box(reflectance, emitted_exitance), FURNACE_MESH)
 
-    return prepare
+    return make
 
 
 @pytest.fixture(scope="session")
-def cornell() -> Iterator[api.Prepared]:
+def cornell() -> Iterator[Prepared]:
     """The Cornell box on :data:`CORNELL_MESH`; its column cache is shared by every test."""
-    prepared = api.prepare(cornell_box(), api.RenderSettings(mesh=CORNELL_MESH))
+    prepared = prepare(cornell_box(), CORNELL_MESH)
     yield prepared
     prepared.close()
 
 
 @pytest.fixture(scope="session")
-def cornell_dense(cornell: api.Prepared) -> np.ndarray:
+def cornell_dense(cornell: Prepared) -> np.ndarray:
     """(R, 3) receiver radiosity of :func:`cornell` by a direct dense solve [W m-2]."""
     return dense_solve(cornell.mesh, cornell.engine)
 
 
 @pytest.fixture(scope="session")
-def cornell_fine() -> Iterator[tuple[api.Prepared, SolveResult]]:
+def cornell_fine() -> Iterator[tuple[Prepared, SolveResult]]:
     """The Cornell box at about 4000 receivers, solved to the default tolerance."""
-    prepared = api.prepare(
-        cornell_box(), api.RenderSettings(mesh=MeshSettings(receivers=4000, patches=100))
-    )
+    prepared = prepare(cornell_box(), MeshSettings(receivers=4000, patches=100))
     result = solve(prepared.mesh, prepared.engine, SolveSettings())
     yield prepared, result
     prepared.close()

@@ -13,12 +13,13 @@ import numpy as np
 import pytest
 
 from raytrad import api
-from raytrad.io.ply import read_radiosity_ply
-from raytrad.mesh import MeshSettings
-from raytrad.scenes import cornell_box, write_obj
-from raytrad.solver import SHOOTING_METHODS, SolveSettings
-
-from .conftest import SCENES, run_cli
+from raytrad.core.mesh import MeshSettings
+from raytrad.core.solver import SHOOTING_METHODS, SolveSettings
+from raytrad.formats.ply import read_radiosity_ply
+from raytrad.scene.builtin import cornell_box
+from raytrad.scenefiles import write_obj
+from raytrad.settings import RenderSettings
+from tests.conftest import SCENES, run_cli
 
 FURNACE_OBJ = SCENES / "furnace.obj"  # unit cube, Kd 0.5, Ke 1: B = 2 everywhere
 SMALL = ["--receivers", "800", "--patches", "60", "-q"]
@@ -37,7 +38,7 @@ def test_render_furnace(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> N
     assert status == 0, err
     positions, triangles, radiosity = read_radiosity_ply(out / "furnace.ply")
     assert len(positions) > 500 and len(triangles) > 500
-    np.testing.assert_allclose(radiosity, 2.0, rtol=1e-2)
+    np.testing.assert_allclose(radiosity, 2.0, rtol=2e-3)  # twice the default tolerance
     report = json.loads((out / "report.json").read_text())
     assert report["solve"]["stop_reason"] == "converged"
     assert report["solve"]["residual"] <= 1e-3
@@ -180,7 +181,7 @@ def test_scene_without_emitter_warns_and_writes_zeros(
 def test_interrupted_render_resumes_to_the_same_answer(tmp_path: Path) -> None:
     write_obj(cornell_box(), tmp_path / "cornell.obj")  # occluders: rays and sample points
     scene = tmp_path / "cornell.obj"
-    settings = api.RenderSettings(
+    settings = RenderSettings(
         mesh=MeshSettings(receivers=800, patches=60), solve=SolveSettings(tolerance=1e-4)
     )
     straight = api.render(scene, tmp_path / "straight", settings)
@@ -208,7 +209,7 @@ def test_resume_refuses_a_checkpoint_of_other_settings(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
     out = tmp_path / "out"
-    settings = api.RenderSettings(mesh=MeshSettings(receivers=800, patches=60))
+    settings = RenderSettings(mesh=MeshSettings(receivers=800, patches=60))
     polls = itertools.count()
     api.render(FURNACE_OBJ, out, settings, stop=lambda: next(polls) >= 3)
     assert (out / "furnace.checkpoint.npz").is_file()

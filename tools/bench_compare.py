@@ -16,11 +16,10 @@ import sys
 import tempfile
 from pathlib import Path
 
-from raytrad.api import RenderSettings
-from raytrad.compare import compare, markdown_table
-from raytrad.mesh import MeshSettings
-from raytrad.scenes import cornell_box, furnace_box, shadow_scene, write_glb, write_obj
-from raytrad.solver import SHOOTING_METHODS, SolveSettings
+from raytrad import api
+from raytrad.scene.builtin import cornell_box, furnace_box, shadow_scene
+from raytrad.scenefiles import write_glb, write_obj
+from raytrad.settings import MeshSettings, RenderSettings, SolveSettings, method_summaries
 
 
 def scene_files(directory: Path) -> dict[str, Path]:
@@ -49,13 +48,13 @@ def main(argv: list[str] | None = None) -> int:
     )
     with tempfile.TemporaryDirectory() as tmp:
         for name, path in scene_files(Path(tmp)).items():
-            summary = compare(path, args.out / name, list(SHOOTING_METHODS), settings)
+            summary = api.compare(path, args.out / name, list(method_summaries()), settings)
             rows = {row["method"]: row for row in summary["table"]}
             print(
                 f"\n## {name}: {summary['receivers']} receivers, {summary['patches']} "
                 f"patches, reference {summary['reference']['kind']}\n"
             )
-            print(markdown_table(summary["table"]), end="")
+            print(api.comparison_table(summary), end="")
             ambient = rows["ambient"]["shots_to_0.001"]
             progressive = rows["progressive"]["shots_to_0.001"]
             if ambient and progressive:

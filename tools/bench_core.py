@@ -21,10 +21,11 @@ from pathlib import Path
 import numpy as np
 
 from raytrad import api
-from raytrad.io.loaders import load_scene
-from raytrad.mesh import MeshSettings
-from raytrad.solver import SHOOTING_METHODS, SolveSettings, solve
-from raytrad.visibility import Occluder
+from raytrad.core.mesh import MeshSettings
+from raytrad.core.solver import SHOOTING_METHODS, SolveSettings, solve
+from raytrad.core.visibility import Occluder
+from raytrad.scenefiles import load_scene
+from raytrad.settings import RenderSettings
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -73,7 +74,7 @@ def raw_throughput(occluder: Occluder, rays: tuple[np.ndarray, np.ndarray, np.nd
 
 def run(receivers: int, method: str, tolerance: float) -> dict[str, float | int | str]:
     scene = load_scene(ROOT / "scenes" / "cornell-box.obj")
-    settings = api.RenderSettings(mesh=MeshSettings(receivers=receivers))
+    settings = RenderSettings(mesh=MeshSettings(receivers=receivers))
     with _Recorder(budget=4_000_000) as recorder:
         prepared = api.prepare(scene, settings)  # every column traced here, rays recorded
     try:

@@ -25,13 +25,14 @@ from typing import Any, TypeVar
 import numpy as np
 
 from raytrad import api
-from raytrad.camera import Camera
-from raytrad.image import _primary_directions, automatic_camera, render_radiance
-from raytrad.io.gltf_camera import read_gltf_cameras
-from raytrad.io.loaders import load_scene
-from raytrad.lightmap import LightmapSettings, bake_lightmap
-from raytrad.mesh import MeshSettings
-from raytrad.visibility import Occluder
+from raytrad.core.mesh import MeshSettings
+from raytrad.core.visibility import Occluder
+from raytrad.products.framing import automatic_camera
+from raytrad.products.image import primary_directions, render_radiance
+from raytrad.products.lightmap import LightmapSettings, bake_lightmap
+from raytrad.scene import Camera
+from raytrad.scenefiles import load_scene, read_gltf_cameras
+from raytrad.settings import RenderSettings
 
 ROOT = Path(__file__).resolve().parent.parent
 SCENE = ROOT / "scenes" / "cornell-box-uv.glb"
@@ -51,7 +52,7 @@ def _raw_embree(prepared: api.Prepared, camera: Camera, width: int, height: int)
     occluder = Occluder(mesh.positions, mesh.triangles)
     try:
         origin = occluder.to_local(np.asarray(camera.position, dtype=np.float64)[None, :])
-        direction = _primary_directions(camera, width, height, 0.5, 0.5)
+        direction = primary_directions(camera, width, height, 0.5, 0.5)
         origins = np.broadcast_to(origin, direction.shape)
         _, seconds = _timed(occluder.intersect_barycentric_local, origins, direction)
     finally:
@@ -70,7 +71,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
 
     scene = load_scene(SCENE, uv_set=1)
-    settings = api.RenderSettings(mesh=MeshSettings(receivers=args.receivers))
+    settings = RenderSettings(mesh=MeshSettings(receivers=args.receivers))
     (prepared, result), solve_seconds = _timed(api.solve_scene, scene, settings)
     mesh = prepared.mesh
     print(

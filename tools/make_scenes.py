@@ -1,4 +1,5 @@
-"""Write the bundled scene files under ``scenes/`` from the builders in :mod:`raytrad.scenes`.
+"""Write the bundled scene files under ``scenes/`` from the builders in
+:mod:`raytrad.scene.builtin`.
 
 Writes ``cornell-box.obj``/``.mtl``, ``furnace.obj``/``.mtl`` (reflectance 0.5, emitted
 exitance 1 W m-2), ``shadow.glb`` (glTF, so its double-sided occluder stays
@@ -30,7 +31,8 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     if str(REPOSITORY) not in sys.path:  # run from a checkout without installing raytrad
         sys.path.insert(0, str(REPOSITORY))
-    from raytrad.scenes import cornell_box, furnace_box, shadow_scene, write_glb, write_obj
+    from raytrad.scene.builtin import cornell_box, furnace_box, shadow_scene
+    from raytrad.scenefiles import write_glb, write_obj
 
     out: Path = args.out
     write_obj(cornell_box(), out / "cornell-box.obj")
@@ -49,9 +51,9 @@ def _lightmapped_cornell_box() -> tuple[Any, list[Any]]:
     """The Cornell box with authored lightmap UVs and two named cameras."""
     import dataclasses
 
-    from raytrad.camera import Camera, NamedCamera
-    from raytrad.io.xatlas_adapter import generate_atlas
-    from raytrad.scenes import CORNELL_CAMERA, cornell_box
+    from raytrad.products.atlas import generate_atlas
+    from raytrad.scene import Camera, NamedCamera
+    from raytrad.scene.builtin import CORNELL_CAMERA, cornell_box
 
     scene = cornell_box()
     _, triangles, uv, _ = generate_atlas(scene.positions, scene.triangles, 256, padding=4)

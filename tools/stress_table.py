@@ -27,7 +27,7 @@ if str(REPOSITORY) not in sys.path:
 import numpy as np  # noqa: E402
 
 from raytrad.errors import RaytradError  # noqa: E402
-from raytrad.scenes import furnace_box  # noqa: E402
+from raytrad.scene.builtin import furnace_box  # noqa: E402
 from tests.stress.cases import (  # noqa: E402
     CASES,
     MAX_SHOTS,

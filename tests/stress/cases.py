@@ -21,23 +21,16 @@ from typing import Any
 
 import numpy as np
 
-from raytrad import api
+from raytrad.core import pipeline
+from raytrad.core.formfactor import Column
+from raytrad.core.mesh import MeshSettings
+from raytrad.core.pipeline import Prepared
+from raytrad.core.reference import dense_solve
+from raytrad.core.solver import SolveResult, SolveSettings, solve
 from raytrad.errors import RaytradError
-from raytrad.formfactor import Column
-from raytrad.mesh import MeshSettings
-from raytrad.reference import dense_solve
 from raytrad.scene import Scene, make_scene, triangle_areas_normals
-from raytrad.scenes import cornell_box, furnace_box
-from raytrad.solver import SolveResult, SolveSettings, solve
-
-from .geometry import (
-    SceneBuilder,
-    add_block,
-    add_room,
-    box_faces,
-    grid_wall,
-    rectangle,
-)
+from raytrad.scene.builder import SceneBuilder, box_faces, rectangle
+from raytrad.scene.builtin import cornell_box, furnace_box
 
 #: Shot cap of every ambient solve in the suite (the slowest case needs about 17 000).
 MAX_SHOTS = 60_000
@@ -60,7 +53,7 @@ class Run:
     """One solve of one case: what the measure functions look at."""
 
     case: StressCase
-    prepared: api.Prepared
+    prepared: Prepared
     result: SolveResult
     setup_seconds: float
 
@@ -113,16 +106,16 @@ class StressCase:
 # --------------------------------------------------------------------------------------
 
 
-def prepare(case: StressCase) -> tuple[api.Prepared, float]:
+def prepare(case: StressCase) -> tuple[Prepared, float]:
     """Mesh and balance the case's scene; returns the Prepared and the seconds it took."""
     start = time.perf_counter()
-    prepared = api.prepare(case.build(), api.RenderSettings(mesh=case.mesh))
+    prepared = pipeline.prepare(case.build(), case.mesh)
     return prepared, time.perf_counter() - start
 
 
 def solve_prepared(
     case: StressCase,
-    prepared: api.Prepared,
+    prepared: Prepared,
     method: str = "ambient",
     max_shots: int = MAX_SHOTS,
     time_limit: float = TIME_LIMIT,
@@ -214,9 +207,9 @@ def furnace_case(rho: float) -> StressCase:
 def lamp_box(rho: float, lamp: str = "y+", emitted: float = 1.0) -> Scene:
     """The unit cube, rho everywhere, the face ``lamp`` (1 m2) emitting ``emitted``."""
     b = SceneBuilder()
-    b.material_named("wall", rho)
-    b.material_named("lamp", rho, emitted)
-    add_room(b, "wall", face_material={lamp: "lamp"})
+    b.material("wall", rho)
+    b.material("lamp", rho, emitted)
+    b.room("wall", face_material={lamp: "lamp"})
     return b.build()
 
 
@@ -237,13 +230,13 @@ def block_room(rho: float, standing: bool) -> Scene:
     A standing block has no bottom face (it sits on the floor); a floating one is closed.
     """
     b = SceneBuilder()
-    b.material_named("wall", rho)
-    b.material_named("lamp", rho, 1.0)
-    add_room(b, "wall", face_material={"y+": "lamp"})
+    b.material("wall", rho)
+    b.material("lamp", rho, 1.0)
+    b.room("wall", face_material={"y+": "lamp"})
     if standing:
-        add_block(b, "wall", (0.3, 0.0, 0.3), (0.6, 0.5, 0.7))
+        b.block("wall", (0.3, 0.0, 0.3), (0.6, 0.5, 0.7))
     else:
-        add_block(b, "wall", (0.3, 0.2, 0.3), (0.6, 0.5, 0.7), bottom=True)
+        b.block("wall", (0.3, 0.2, 0.3), (0.6, 0.5, 0.7), bottom=True)
     return b.build()
 
 
@@ -268,8 +261,8 @@ def block_case(rho: float, standing: bool) -> StressCase:
 def lossless_open_scene() -> Scene:
     """A white floor (rho = 1) under a square lamp (rho = 1): light escapes to the sky."""
     b = SceneBuilder()
-    b.material_named("floor", 1.0)
-    b.material_named("lamp", 1.0, 10.0)
+    b.material("floor", 1.0)
+    b.material("lamp", 1.0, 10.0)
     b.quad(rectangle(1, 0.0, (0, 0), (1, 1)), "floor", (0, 1, 0))
     b.quad(rectangle(1, 1.0, (0.4, 0.4), (0.6, 0.6)), "lamp", (0, -1, 0))
     return b.build()
@@ -291,14 +284,14 @@ def open_room(rho: float, opening: str) -> Scene:
     the middle of the z = 1 wall (the wall a conforming 3 x 3 grid less its centre).
     """
     b = SceneBuilder()
-    b.material_named("wall", rho)
-    b.material_named("lamp", rho, 10.0)
-    add_room(b, "wall", skip=("y+", "z+"))
-    grid_wall(b, 1, 1.0, LAMP_CUTS, LAMP_CUTS, "wall", (0, -1, 0), {(1, 1): "lamp"})
+    b.material("wall", rho)
+    b.material("lamp", rho, 10.0)
+    b.room("wall", skip=("y+", "z+"))
+    b.grid_wall(1, 1.0, LAMP_CUTS, LAMP_CUTS, "wall", (0, -1, 0), {(1, 1): "lamp"})
     if opening.startswith("window-"):
         w = float(opening.removeprefix("window-"))
         cuts = (0.0, 0.5 - w / 2, 0.5 + w / 2, 1.0)
-        grid_wall(b, 2, 1.0, cuts, cuts, "wall", (0, 0, -1), {(1, 1): None})
+        b.grid_wall(2, 1.0, cuts, cuts, "wall", (0, 0, -1), {(1, 1): None})
     return b.build()
 
 
@@ -386,7 +379,7 @@ def surface_means(
 @functools.lru_cache(maxsize=1)
 def cornell_metre_reference() -> tuple[np.ndarray, np.ndarray]:
     """Receiver radiosity and per-quad means of the Cornell box in metres (ambient, 1e-5)."""
-    prepared = api.prepare(scaled_cornell("m"), api.RenderSettings(mesh=cornell_mesh(1.0)))
+    prepared = pipeline.prepare(scaled_cornell("m"), cornell_mesh(1.0))
     try:
         result = solve(
             prepared.mesh,
@@ -443,9 +436,9 @@ BULB_EXITANCE = 1e9
 def bulb_hall(rho: float = 0.9) -> Scene:
     """A 10 m cube of reflectance rho with a 1 mm2 bulb 1 mm below the ceiling, facing down."""
     b = SceneBuilder()
-    b.material_named("wall", rho)
-    b.material_named("bulb", rho, BULB_EXITANCE)
-    add_room(b, "wall", size=(HALL, HALL, HALL))
+    b.material("wall", rho)
+    b.material("bulb", rho, BULB_EXITANCE)
+    b.room("wall", size=(HALL, HALL, HALL))
     h, c = BULB_SIDE / 2, HALL / 2
     b.quad(rectangle(1, HALL - 1e-3, (c - h, c - h), (c + h, c + h)), "bulb", (0, -1, 0))
     return b.build()
@@ -462,9 +455,9 @@ LED_AREA = 2e-4
 def many_emitters(rho: float = 0.9) -> Scene:
     """The unit cube with 1000 small double-sided emitting triangles on a lattice inside."""
     b = SceneBuilder()
-    b.material_named("wall", rho)
-    b.material_named("led", rho, LED_EXITANCE, True)
-    add_room(b, "wall")
+    b.material("wall", rho)
+    b.material("led", rho, LED_EXITANCE, True)
+    b.room("wall")
     steps = 0.1 + 0.8 * np.arange(LED_COUNT) / (LED_COUNT - 1)
     for x in steps:
         for y in steps:
@@ -482,10 +475,10 @@ REFLECTING_LAMP = 10.0
 def reflecting_lamp_room(rho: float = 0.9) -> Scene:
     """Closed cube of reflectance rho; the 0.04 m2 centre cell of the ceiling grid emits."""
     b = SceneBuilder()
-    b.material_named("wall", rho)
-    b.material_named("lamp", rho, REFLECTING_LAMP)
-    add_room(b, "wall", skip=("y+",))
-    grid_wall(b, 1, 1.0, LAMP_CUTS, LAMP_CUTS, "wall", (0, -1, 0), {(1, 1): "lamp"})
+    b.material("wall", rho)
+    b.material("lamp", rho, REFLECTING_LAMP)
+    b.room("wall", skip=("y+",))
+    b.grid_wall(1, 1.0, LAMP_CUTS, LAMP_CUTS, "wall", (0, -1, 0), {(1, 1): "lamp"})
     return b.build()
 
 
@@ -519,9 +512,9 @@ PANEL_SIDE = 0.4
 def double_sided_panel_room(rho: float = 0.9) -> Scene:
     """Closed cube with a 0.4 m square double-sided emitting panel at mid-height."""
     b = SceneBuilder()
-    b.material_named("wall", rho)
-    b.material_named("panel", rho, PANEL_EXITANCE, True)
-    add_room(b, "wall")
+    b.material("wall", rho)
+    b.material("panel", rho, PANEL_EXITANCE, True)
+    b.room("wall")
     lo, hi = 0.5 - PANEL_SIDE / 2, 0.5 + PANEL_SIDE / 2
     b.quad(rectangle(1, 0.5, (lo, lo), (hi, hi)), "panel")
     return b.build()
@@ -564,9 +557,9 @@ def defect_box(
     walls = walls or {}
     b = SceneBuilder()
     wall_emission = 0.0 if lamp else 1.0
-    b.material_named("wall", rho, wall_emission)
-    b.material_named("lamp", rho, 1.0)
-    b.material_named("fin", rho, wall_emission, True)
+    b.material("wall", rho, wall_emission)
+    b.material("lamp", rho, 1.0)
+    b.material("fin", rho, wall_emission, True)
     for name, corners, outward in box_faces((0, 0, 0), (1, 1, 1)):
         material = "lamp" if lamp and name == "y+" else "wall"
         if name in walls:
@@ -716,8 +709,8 @@ def defect_cases(name: str, title: str, build: Callable[[bool], Scene]) -> list[
 
 def dark_room() -> Scene:
     b = SceneBuilder()
-    b.material_named("wall", 0.9)
-    add_room(b, "wall")
+    b.material("wall", 0.9)
+    b.room("wall")
     return b.build()
 
 
@@ -727,8 +720,8 @@ AWAY_EXITANCE = 10.0
 def lamp_facing_away() -> Scene:
     """A floor (rho 0.8) and, 0.5 m above it, a lamp (rho 0.5) facing up into the empty sky."""
     b = SceneBuilder()
-    b.material_named("floor", 0.8)
-    b.material_named("lamp", 0.5, AWAY_EXITANCE)
+    b.material("floor", 0.8)
+    b.material("lamp", 0.5, AWAY_EXITANCE)
     b.quad(rectangle(1, 0.0, (0, 0), (1, 1)), "floor", (0, 1, 0))
     b.quad(rectangle(1, 0.5, (0.3, 0.3), (0.7, 0.7)), "lamp", (0, 1, 0))
     return b.build()
@@ -921,10 +914,10 @@ def case(name: str) -> StressCase:
 
 
 def lossless_check(scene: Scene) -> float:
-    """Seconds until ``api.prepare`` refuses a scene (it must raise RaytradError)."""
+    """Seconds until ``prepare`` refuses a scene (it must raise RaytradError)."""
     start = time.perf_counter()
     try:
-        api.prepare(scene, api.RenderSettings(mesh=BOX_MESH)).close()
+        pipeline.prepare(scene, BOX_MESH).close()
     except RaytradError:
         return time.perf_counter() - start
     raise AssertionError("the scene was accepted")

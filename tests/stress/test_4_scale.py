@@ -13,10 +13,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from raytrad import api
-from raytrad.io.loaders import load_scene
-from raytrad.scenes import cornell_box, write_obj
-from raytrad.solver import SolveSettings, solve
+from raytrad.core.pipeline import prepare
+from raytrad.core.solver import SolveSettings, solve
+from raytrad.scene.builtin import cornell_box
+from raytrad.scenefiles import load_scene, write_obj
 
 from .cases import (
     MAX_SHOTS,
@@ -66,7 +66,7 @@ def test_model_in_millimetres_loaded_with_scale(tmp_path: Path) -> None:
     path = tmp_path / "cornell-mm.obj"
     write_obj(cornell_box().scaled(1e3), path)
     scene = load_scene(path, scale=1e-3)
-    prepared = api.prepare(scene, api.RenderSettings(mesh=cornell_mesh(1.0)))
+    prepared = prepare(scene, cornell_mesh(1.0))
     try:
         result = solve(
             prepared.mesh,

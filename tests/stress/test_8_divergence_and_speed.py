@@ -11,10 +11,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from raytrad import api
+from raytrad.core import pipeline
+from raytrad.core.solver import SolveSettings, solve
 from raytrad.errors import SolverError
-from raytrad.scenes import furnace_box
-from raytrad.solver import SolveSettings, solve
+from raytrad.scene.builtin import furnace_box
 
 from .cases import (
     BOX_MESH,
@@ -39,7 +39,7 @@ def test_ambient_survives_form_factors_that_sum_to_099() -> None:
 
 @pytest.mark.filterwarnings("ignore:overflow:RuntimeWarning")  # part of the bug described
 def test_energy_creating_form_factors_are_reported_as_divergence() -> None:
-    prepared = api.prepare(furnace_box(0.995, 1.0), api.RenderSettings(mesh=BOX_MESH))
+    prepared = pipeline.prepare(furnace_box(0.995, 1.0), BOX_MESH)
     try:
         try:
             result = solve(

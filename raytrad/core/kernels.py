@@ -1,0 +1,215 @@
+"""Form-factor kernels: closed-form point-to-area factors, numpy-vectorised over pairs.
+
+* :func:`disk_form_factor`: the Wallace et al. (1989) disk approximation of a
+  differential-to-area factor (REFERENCE.md section 2);
+* :func:`polygon_form_factor`: the exact unoccluded point-to-polygon factor (Lambert's
+  formula, REFERENCE.md section 3), clipped to the receiver's horizon;
+* :func:`contour_form_factor`: Lambert's formula over the boundary edges of a planar
+  surface (interior edges cancel).
+
+Clipping at the horizon needs no tolerance: Lambert's formula is continuous as a corner
+crosses the receiver's plane, so a corner at +-1e-17 m gives the same factor either way.
+Choosing a ray *target* is not continuous (the centroid of the whole triangle or of its
+clipped part), so :func:`visible_centroid` counts heights within ``tol.horizon`` of the
+pair's size as on the horizon (:func:`horizon_heights`).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from raytrad.constants import tol
+
+
+def disk_form_factor(
+    cos_receiver: np.ndarray, cos_source: np.ndarray, distance_sq: np.ndarray, area: np.ndarray
+) -> np.ndarray:
+    """Wallace et al. disk approximation of a differential-to-area form factor.
+
+    Parameters
+    ----------
+    cos_receiver, cos_source : array_like
+        Cosines between the connecting line and each normal [1].
+    distance_sq : array_like
+        Squared distance [m2].
+    area : array_like
+        Sub-area [m2].
+
+    Returns
+    -------
+    ndarray, cos_r cos_s dA / (pi r^2 + dA) [1]; exact for a coaxial disk of area dA.
+    """
+    return cos_receiver * cos_source * area / (math.pi * distance_sq + area)
+
+
+def horizon_heights(polygons: np.ndarray, points: np.ndarray, normals: np.ndarray) -> np.ndarray:
+    """Heights of polygon corners above each receiver's tangent plane [m], snapped to 0
+    within ``tol.horizon`` x the largest corner distance of their pair (the corner lies on
+    the horizon up to rounding).
+
+    Parameters
+    ----------
+    polygons : (N, K, 3) float64
+        Corners [m].
+    points : (N, 3) float64
+        Receiver positions [m].
+    normals : (N, 3) float64
+        Receiver unit normals.
+
+    Returns
+    -------
+    (N, K) float64
+    """
+    offsets = polygons - points[:, None, :]
+    height = np.einsum("nkj,nj->nk", offsets, normals)
+    reach = np.sqrt(np.einsum("nkj,nkj->nk", offsets, offsets).max(axis=1))
+    return np.where(np.abs(height) <= tol.horizon * reach[:, None], 0.0, height)
+
+
+def clip_to_horizon(
+    polygons: np.ndarray, points: np.ndarray, normals: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Clip triangles to the half-space in front of each receiver (Sutherland-Hodgman).
+
+    Parameters
+    ----------
+    polygons : (N, 3, 3) float64
+        Triangle corners [m].
+    points : (N, 3) float64
+        Receiver positions [m].
+    normals : (N, 3) float64
+        Receiver unit normals.
+
+    Returns
+    -------
+    clipped : (N, 4, 3) float64
+        Polygon corners in order; shorter polygons repeat their last corner.
+    count : (N,) int64
+        Corner count (0 when nothing is above the horizon).
+    """
+    n = len(polygons)
+    h = np.einsum("nkj,nj->nk", polygons - points[:, None, :], normals)
+    candidates = np.zeros((n, 6, 3))
+    valid = np.zeros((n, 6), dtype=bool)
+    for k in range(3):
+        a, b = polygons[:, k], polygons[:, (k + 1) % 3]
+        ha, hb = h[:, k], h[:, (k + 1) % 3]
+        candidates[:, 2 * k] = a
+        valid[:, 2 * k] = ha >= 0
+        crosses = (ha >= 0) != (hb >= 0)
+        t = np.where(crosses, ha / np.where(crosses, ha - hb, 1.0), 0.0)
+        candidates[:, 2 * k + 1] = a + t[:, None] * (b - a)
+        valid[:, 2 * k + 1] = crosses
+    order = np.argsort(~valid, axis=1, kind="stable")[:, :4]
+    count = valid.sum(axis=1)
+    clipped = np.take_along_axis(candidates, order[:, :, None], axis=1)
+    last = np.maximum(count - 1, 0)
+    pad = np.arange(4)[None, :] >= count[:, None]
+    clipped = np.where(pad[:, :, None], clipped[np.arange(n), last][:, None, :], clipped)
+    return clipped, np.minimum(count, 4)
+
+
+def polygon_form_factor(
+    polygons: np.ndarray, points: np.ndarray, normals: np.ndarray
+) -> np.ndarray:
+    """Exact unoccluded point-to-polygon form factor (Lambert's formula).
+
+    ``F = |sum_k gamma_k n . (u_k x u_k+1) / |u_k x u_k+1|| / (2 pi)`` with u_k the unit
+    vectors to the corners (REFERENCE.md section 3). The polygons are first clipped to each
+    receiver's horizon, so the formula's precondition holds.
+
+    Parameters
+    ----------
+    polygons : (N, 3, 3) float64
+        Triangle corners [m] (any winding).
+    points : (N, 3) float64
+        Receiver positions [m].
+    normals : (N, 3) float64
+        Receiver unit normals.
+
+    Returns
+    -------
+    (N,) float64 form factors [1].
+    """
+    height = np.einsum("nkj,nj->nk", polygons - points[:, None, :], normals)
+    whole = (height >= 0).all(axis=1)
+    out = np.zeros(len(polygons))
+    if whole.any():
+        out[whole] = _lambert(polygons[whole], points[whole], normals[whole])
+    part = ~whole & (height > 0).any(axis=1)
+    if part.any():
+        clipped, count = clip_to_horizon(polygons[part], points[part], normals[part])
+        out[part] = np.where(count >= 3, _lambert(clipped, points[part], normals[part]), 0.0)
+    return out
+
+
+def visible_centroid(polygons: np.ndarray, points: np.ndarray, normals: np.ndarray) -> np.ndarray:
+    """(N, 3) mean corner of each triangle's part above the receiver's horizon [m].
+
+    A triangle straddling the horizon (the floor running under a block, seen from the
+    block's side) is aimed at in its visible part, not at a centroid behind the block.
+    """
+    height = horizon_heights(polygons, points, normals)
+    target = polygons.mean(axis=1)
+    part = ~(height >= 0).all(axis=1)
+    if part.any():
+        clipped, count = clip_to_horizon(polygons[part], points[part], normals[part])
+        valid = np.arange(4)[None, :] < count[:, None]
+        total = (clipped * valid[:, :, None]).sum(axis=1)
+        target[part] = total / np.maximum(count, 1)[:, None]
+    return target
+
+
+def _lambert(polygons: np.ndarray, points: np.ndarray, normals: np.ndarray) -> np.ndarray:
+    """Lambert's formula for (N, k, 3) polygons wholly above each receiver's horizon."""
+    d = polygons - points[:, None, :]
+    return edge_sum(d, np.roll(d, -1, axis=1), normals)
+
+
+def edge_sum(u: np.ndarray, v: np.ndarray, normals: np.ndarray) -> np.ndarray:
+    """|sum over edges of gamma n.(u x v)/|u x v|| / (2 pi): Lambert's formula.
+
+    Parameters
+    ----------
+    u, v : (N, E, 3) float64
+        Vectors from each receiver to the start and end of each edge [m].
+    normals : (N, 3) float64
+        Receiver unit normals.
+
+    Returns
+    -------
+    (N,) float64 form factors [1]; an edge through the receiver contributes nothing.
+    """
+    u = u / np.maximum(np.linalg.norm(u, axis=2), 1e-300)[:, :, None]
+    v = v / np.maximum(np.linalg.norm(v, axis=2), 1e-300)[:, :, None]
+    cross = np.cross(u, v)
+    sin = np.linalg.norm(cross, axis=2)
+    gamma = np.arctan2(sin, np.einsum("nej,nej->ne", u, v))
+    projected = np.einsum("nej,nj->ne", cross, normals) / np.where(sin > 0, sin, 1.0)
+    total = np.where(sin > 0, gamma * projected, 0.0).sum(axis=1)
+    return np.abs(total) / (2.0 * math.pi)
+
+
+def contour_form_factor(
+    start: np.ndarray, end: np.ndarray, points: np.ndarray, normals: np.ndarray
+) -> np.ndarray:
+    """Lambert's formula summed over the boundary edges of a surface.
+
+    Parameters
+    ----------
+    start, end : (E, 3) float64
+        Oriented boundary edges of one surface [m], wholly above every receiver's horizon.
+    points : (C, 3) float64
+        Receiver positions [m].
+    normals : (C, 3) float64
+        Receiver unit normals.
+
+    Returns
+    -------
+    (C,) float64 unoccluded form factors [1].
+    """
+    return edge_sum(
+        start[None, :, :] - points[:, None, :], end[None, :, :] - points[:, None, :], normals
+    )

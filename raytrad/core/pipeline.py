@@ -1,0 +1,158 @@
+"""From a scene and mesh settings to a solvable problem: repair, acceleration, mesh, form
+factors. Everything before the first shot, and nothing that reads or writes a file.
+
+>>> from raytrad.core.pipeline import prepare
+>>> from raytrad.core.solver import solve
+>>> from raytrad.scene.builtin import furnace_box
+>>> with prepare(furnace_box(0.5, 1.0)) as problem:                   # doctest: +SKIP
+...     result = solve(problem.mesh, problem.engine)
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from collections.abc import Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from raytrad.constants import defaults, scene_extent, tol
+from raytrad.core.formfactor import FormFactorEngine, receiver_points
+from raytrad.core.mesh import MeshSettings, RadiosityMesh, build_mesh, hide_receivers
+from raytrad.core.repair import repair_scene
+from raytrad.core.solver import check_solvable
+from raytrad.core.visibility import Occluder, nothing_can_occlude
+from raytrad.scene import Scene, triangle_areas_normals
+
+log = logging.getLogger(__name__)
+
+
+@dataclass
+class Prepared:
+    """A scene made ready to solve: its repaired scene, mesh and form-factor engine.
+
+    Attributes
+    ----------
+    scene : Scene
+        The repaired scene the mesh was built from.
+    mesh : RadiosityMesh
+    engine : FormFactorEngine
+        Every column computed, balanced and cached (within the cache budget).
+    occluder : Occluder or None
+        None when nothing in the scene can occlude (a convex enclosure): no rays at all.
+    timings : dict of str to float
+        Seconds spent in ``mesh``, ``acceleration`` and ``form_factors`` [s].
+    closed_receivers : (R,) bool or None
+        Receivers that see no opening (their form factors sum to 1).
+    balance : dict
+        What balancing did (:meth:`FormFactorEngine.balance`).
+    """
+
+    scene: Scene
+    mesh: RadiosityMesh
+    engine: FormFactorEngine
+    occluder: Occluder | None
+    timings: dict[str, float]
+    closed_receivers: np.ndarray | None = None
+    balance: dict[str, float] = field(default_factory=dict)
+
+    def close(self) -> None:
+        """Release the thread pools and the acceleration structure."""
+        self.engine.close()
+        if self.occluder is not None:
+            self.occluder.close()
+
+    def __enter__(self) -> Prepared:
+        return self
+
+    def __exit__(self, *exc: Any) -> None:
+        self.close()
+
+    def new_engine(self) -> FormFactorEngine:
+        """A fresh engine on the same mesh (no cached columns), closed rows normalised."""
+        engine = FormFactorEngine(self.mesh, self.occluder, cache_bytes=self.engine.cache_bytes)
+        engine.balance(self.closed_receivers)
+        return engine
+
+
+@contextmanager
+def timed(timings: dict[str, float], stage: str) -> Iterator[None]:
+    """Add the seconds the body takes to ``timings[stage]``."""
+    start = time.perf_counter()
+    try:
+        yield
+    finally:
+        timings[stage] = timings.get(stage, 0.0) + time.perf_counter() - start
+
+
+def prepare(
+    scene: Scene,
+    mesh_settings: MeshSettings | None = None,
+    cache_mb: float = defaults.cache_mb,
+) -> Prepared:
+    """Repair, mesh and balance ``scene``: everything before the first shot.
+
+    Duplicate and inside-out faces are fixed (with warnings, :mod:`raytrad.core.repair`);
+    no acceleration structure is built when nothing can occlude (a convex enclosure); every
+    form-factor column is computed and balanced (:meth:`FormFactorEngine.balance`).
+
+    Parameters
+    ----------
+    scene : Scene
+    mesh_settings : MeshSettings
+    cache_mb : float
+        Memory for cached form-factor columns [MiB].
+
+    Raises
+    ------
+    SolverError
+        The system has no finite solution (checked before any form factor is computed).
+    """
+    mesh_settings = mesh_settings or MeshSettings()
+    timings: dict[str, float] = {}
+    with timed(timings, "mesh"):
+        scene = repair_scene(scene)
+    with timed(timings, "acceleration"):
+        extent = scene_extent(scene.positions[np.unique(scene.triangles)])
+        occluder = None
+        if not nothing_can_occlude(scene.positions, scene.triangles, tol.plane * extent):
+            occluder = Occluder(scene.positions, scene.triangles)
+    with timed(timings, "mesh"):
+        mesh = build_mesh(scene, mesh_settings, _enclosure_test(scene, occluder))
+    check_solvable(mesh)
+    closed = None
+    with timed(timings, "form_factors"):
+        if occluder is not None:
+            _, normals = triangle_areas_normals(scene.triangle_vertices())
+            points, _ = receiver_points(mesh, tol.ray_offset * occluder.diagonal)
+            closed, hidden = occluder.probe_hemispheres(
+                points, mesh.receiver_normal, normals, scene.double_sided
+            )
+            mesh = hide_receivers(mesh, hidden)
+        engine = FormFactorEngine(mesh, occluder, cache_bytes=int(cache_mb * (1 << 20)))
+        balance = engine.balance(closed)
+    log.info(
+        "form factors: %d closed rows held to 1 (largest miss %.2e), %d patches held to "
+        "capture 1 (largest excess %.2e)",
+        balance["closed_rows"],
+        balance["row_error"],
+        balance["capped_columns"],
+        balance["capture_excess"],
+    )
+    return Prepared(scene, mesh, engine, occluder, timings, closed, balance)
+
+
+def _enclosure_test(scene: Scene, occluder: Occluder | None) -> Any:
+    """``enclosed(points, normals) -> (N,) bool`` for :func:`build_mesh`, or None when
+    nothing can occlude."""
+    if occluder is None:
+        return None
+    _, normals = triangle_areas_normals(scene.triangle_vertices())
+
+    def enclosed(points: np.ndarray, point_normals: np.ndarray) -> np.ndarray:
+        return occluder.enclosed(points, point_normals, normals, scene.double_sided)
+
+    return enclosed

@@ -1,0 +1,501 @@
+"""Shooting solvers: progressive refinement and its overshooting accelerations.
+
+The discrete system
+-------------------
+Receivers j carry radiosity B_j [W m-2]; patches p shoot. The radiosity of patch p is the
+area-weighted mean of its receivers, ``B̄ = W B``. With vertex-to-patch form factors
+F_jp (:mod:`raytrad.formfactor`)::
+
+    B_j = E_j + rho_j * sum_p F_jp * B̄_p                                          (1)
+
+so the patch radiosities solve ``B̄ = W E + W diag(rho) F B̄``. Shooting is Southwell
+iteration on that system (Gortler et al. 1994): patch p has unshot radiosity
+``dB_p = B̄_p - shot_p``; shooting amount s from p adds ``F_jp s`` to the irradiance of
+every receiver and ``s`` to ``shot_p``. Receivers keep their irradiance, patches keep what
+they have shot, and every other quantity is derived (Wallace et al.: vertices to elements
+to patches).
+
+The methods (``../shared/papers/feda-overshooting.txt``)
+---------------------------------------------------------
+* ``progressive``: s = dB_p (Cohen et al. 1988).
+* ``overrelaxation``: s = omega dB_p (formula 2).
+* ``ambient``: s = min(dB_p + rho_p Ambient, sum_q dB_q A_q / A_p) (formulas 3-5). The
+  ambient term assumes every shot is caught by the scene; raytrad replaces the enclosure
+  assumption by the fraction of each shot that receivers actually caught (measured from the
+  form factors, so open scenes and form-factor error do not inflate it), and halves the
+  overshoot whenever the unshot power grows (see :class:`AmbientState`).
+
+All methods shoot per RGB channel with float64 accumulation, choose the shooter by the
+magnitude actually shot summed over channels, shoot negative unshot radiosity too, and
+stop on the remaining unshot power relative to the emitted power.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from raytrad.core.formfactor import Column, FormFactorEngine
+from raytrad.core.mesh import RadiosityMesh
+from raytrad.errors import SettingsError, SolverError
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class SolveSettings:
+    """When and how to stop, and the method.
+
+    Attributes
+    ----------
+    method : str
+        A key of :data:`SHOOTING_METHODS`.
+    tolerance : float
+        Stop when the unshot power is below this fraction of the emitted power [1].
+    time_limit : float or None
+        Stop after this many seconds of solving [s].
+    max_shots : int or None
+        Stop after this many shots.
+    omega : float
+        Overrelaxation factor (``overrelaxation`` only), in [1, 2).
+    """
+
+    method: str = "ambient"
+    tolerance: float = 1e-3
+    time_limit: float | None = None
+    max_shots: int | None = None
+    omega: float = 1.3
+
+    def __post_init__(self) -> None:
+        if self.method not in SHOOTING_METHODS:
+            raise SettingsError(
+                f"unknown method {self.method!r}; choose one of {', '.join(SHOOTING_METHODS)}"
+            )
+        if not (0.0 < self.tolerance < 1.0):
+            raise SettingsError(f"tolerance must lie in (0, 1), got {self.tolerance}")
+        if self.time_limit is not None and self.time_limit <= 0:
+            raise SettingsError(f"time limit must be positive, got {self.time_limit}")
+        if self.max_shots is not None and self.max_shots < 0:
+            raise SettingsError(f"max shots must be >= 0, got {self.max_shots}")
+        if not (1.0 <= self.omega < 2.0):
+            raise SettingsError(f"omega must lie in [1, 2), got {self.omega}")
+
+
+@dataclass
+class SolverState:
+    """Everything a solve accumulates; enough to resume it.
+
+    Attributes
+    ----------
+    irradiance : (R, 3) float64
+        Irradiance received by each receiver from all shots so far [W m-2].
+    patch_radiosity : (P, 3) float64
+        ``W B`` kept incrementally [W m-2].
+    shot : (P, 3) float64
+        Radiosity shot so far by each patch [W m-2].
+    captured : (P,) float64
+        Measured fraction of a shot from each patch caught by receivers, NaN until shot.
+    shots, rays : int
+        Shots taken and visibility rays cast.
+    absorbed, escaped : (3,) float64
+        Power absorbed by receivers and lost to the outside so far [W].
+    ambient_gain : float
+        Damping of the ambient overshoot (1 = formula 4 as published).
+    damping_events : int
+        Times growth of the unshot power (the sign of divergence) halved the overshoot.
+    """
+
+    irradiance: np.ndarray
+    patch_radiosity: np.ndarray
+    shot: np.ndarray
+    captured: np.ndarray
+    shots: int = 0
+    rays: int = 0
+    seconds: float = 0.0
+    absorbed: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    escaped: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    ambient_gain: float = 1.0
+    min_unshot: float = math.inf
+    damping_events: int = 0
+
+    @property
+    def unshot(self) -> np.ndarray:
+        """(P, 3) float64 unshot radiosity of each patch [W m-2]."""
+        return np.asarray(self.patch_radiosity - self.shot)
+
+    #: The arrays and the scalars that make up a state (what a checkpoint stores).
+    ARRAYS = ("irradiance", "patch_radiosity", "shot", "captured", "absorbed", "escaped")
+    SCALARS = ("shots", "rays", "seconds", "ambient_gain", "min_unshot", "damping_events")
+
+    def to_record(self) -> tuple[dict[str, np.ndarray], dict[str, float]]:
+        """The state as named arrays and plain scalars, for a checkpoint."""
+        arrays = {name: np.asarray(getattr(self, name)) for name in self.ARRAYS}
+        return arrays, {name: float(getattr(self, name)) for name in self.SCALARS}
+
+    @classmethod
+    def from_record(cls, arrays: dict[str, np.ndarray], scalars: dict[str, float]) -> SolverState:
+        """The state :meth:`to_record` gave (KeyError when something is missing)."""
+        return cls(
+            **{name: np.array(arrays[name]) for name in cls.ARRAYS},
+            shots=int(scalars["shots"]),
+            rays=int(scalars["rays"]),
+            seconds=float(scalars["seconds"]),
+            ambient_gain=float(scalars["ambient_gain"]),
+            min_unshot=float(scalars["min_unshot"]),
+            damping_events=int(scalars.get("damping_events", 0)),
+        )
+
+
+@dataclass(frozen=True)
+class SolveResult:
+    """What a solve produced.
+
+    Attributes
+    ----------
+    radiosity : (R, 3) float64
+        Radiosity of each receiver [W m-2].
+    state : SolverState
+    stop_reason : str
+        ``converged``, ``time-limit``, ``max-shots``, ``no-emission`` or ``interrupted``.
+    residual : float
+        Unshot power relative to emitted power when the solve stopped [1].
+    emitted_power : (3,) float64 [W]
+    unshot_power : (3,) float64 [W], signed
+    method : str
+    """
+
+    radiosity: np.ndarray
+    state: SolverState
+    stop_reason: str
+    residual: float
+    emitted_power: np.ndarray
+    unshot_power: np.ndarray
+    method: str
+
+
+# --------------------------------------------------------------------------------------
+# Shooting amounts: one function per method (the registry)
+# --------------------------------------------------------------------------------------
+
+ShootAmount = Callable[["_Problem", SolverState, SolveSettings], np.ndarray]
+
+
+def _progressive_amount(
+    problem: _Problem, state: SolverState, settings: SolveSettings
+) -> np.ndarray:
+    """plain progressive refinement (Cohen et al. 1988)"""
+    return state.unshot
+
+
+def _overrelaxation_amount(
+    problem: _Problem, state: SolverState, settings: SolveSettings
+) -> np.ndarray:
+    """progressive refinement shooting omega times the unshot radiosity"""
+    return settings.omega * state.unshot
+
+
+def filled_capture(captured: np.ndarray, patch_area: np.ndarray) -> np.ndarray:
+    """(P,) capture fractions, the area-weighted mean of the measured ones (1 before any
+    shot) standing in for patches that have not shot yet."""
+    known = np.isfinite(captured)
+    mean_capture = 1.0
+    if known.any():
+        mean_capture = float(np.average(captured[known], weights=patch_area[known]))
+    return np.where(known, captured, mean_capture)
+
+
+def _ambient_amount(problem: _Problem, state: SolverState, settings: SolveSettings) -> np.ndarray:
+    """ambient overshooting (Feda 1992), the default and usually fastest
+
+    Formulas 3-5, with the measured capture fraction in the amplification.
+    """
+    unshot = state.unshot
+    area = problem.patch_area
+    unshot_power = area @ unshot  # (3,)
+    capture = filled_capture(state.captured, area)
+    lost = area @ (1.0 - problem.patch_reflectance * capture[:, None])  # (3,)
+    ambient = unshot_power / np.maximum(lost, 1e-300 * area.sum())  # formula 3
+    ambient = np.maximum(ambient, 0.0) * state.ambient_gain
+    amount = unshot + problem.patch_reflectance * ambient[None, :]  # formula 4
+    cap = np.maximum(unshot_power, 0.0)[None, :] / area[:, None]
+    return np.minimum(amount, cap)  # formula 5
+
+
+@dataclass(frozen=True)
+class ShootingMethod:
+    """One entry of the method registry.
+
+    Attributes
+    ----------
+    amount : callable
+        ``amount(problem, state, settings) -> (P, 3)``: what every patch would shoot now.
+        The first line of its docstring is the method's summary.
+    damped : bool
+        Halve the overshoot whenever the unshot power grows well past its minimum (the
+        sign of divergence; see :func:`_guard_growth`).
+    """
+
+    amount: ShootAmount
+    damped: bool = False
+
+    @property
+    def summary(self) -> str:
+        """One line saying what the method does (the first line of ``amount``'s docstring)."""
+        return (self.amount.__doc__ or "").strip().splitlines()[0]
+
+
+#: Registry of shooting methods; the CLI's choices, its help and the docs come from here.
+SHOOTING_METHODS: dict[str, ShootingMethod] = {
+    "progressive": ShootingMethod(_progressive_amount),
+    "overrelaxation": ShootingMethod(_overrelaxation_amount),
+    "ambient": ShootingMethod(_ambient_amount, damped=True),
+}
+
+
+# --------------------------------------------------------------------------------------
+# The solve
+# --------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class _Problem:
+    """Static arrays of the discrete system."""
+
+    patch_area: np.ndarray  # (P,)
+    patch_reflectance: np.ndarray  # (P, 3)
+    receiver_area: np.ndarray  # (R,)
+    receiver_reflectance: np.ndarray  # (R, 3)
+    receiver_emission: np.ndarray  # (R, 3)
+    receiver_ptr: np.ndarray  # (R + 1,) CSR rows of W^T
+    entry_patch: np.ndarray  # (nnz,)
+    entry_weight: np.ndarray  # (nnz,) W[patch, receiver]
+
+    @classmethod
+    def from_mesh(cls, mesh: RadiosityMesh) -> _Problem:
+        tri_patch = np.repeat(mesh.triangle_patch, 3)
+        receiver = mesh.triangle_receivers.reshape(-1)
+        weight = np.repeat(mesh.triangle_area / 3.0, 3) / mesh.patch_area[tri_patch]
+        if mesh.receiver_visible is not None:  # hidden receivers do not count
+            weight = weight * mesh.receiver_visible[receiver]
+        # merge duplicate (receiver, patch) entries
+        key = receiver * mesh.patch_count + tri_patch
+        uniq, inverse = np.unique(key, return_inverse=True)
+        w = np.bincount(inverse.reshape(-1), weights=weight)
+        r = uniq // mesh.patch_count
+        ptr = np.searchsorted(r, np.arange(mesh.receiver_count + 1))
+        return cls(
+            patch_area=mesh.patch_area,
+            patch_reflectance=mesh.patch_reflectance,
+            receiver_area=mesh.receiver_area,
+            receiver_reflectance=mesh.receiver_reflectance,
+            receiver_emission=mesh.receiver_emitted_exitance,
+            receiver_ptr=ptr,
+            entry_patch=uniq % mesh.patch_count,
+            entry_weight=w,
+        )
+
+    def average(self, receivers: np.ndarray, values: np.ndarray) -> np.ndarray:
+        """``W[:, receivers] @ values``: patch means of per-receiver values ((K, 3) -> (P, 3))."""
+        start, stop = self.receiver_ptr[receivers], self.receiver_ptr[receivers + 1]
+        counts = stop - start
+        rows = np.repeat(np.arange(len(receivers)), counts)
+        entries = np.repeat(start, counts) + (
+            np.arange(len(rows)) - np.repeat(np.cumsum(counts) - counts, counts)
+        )
+        p = self.entry_patch[entries]
+        w = self.entry_weight[entries]
+        out = np.empty((len(self.patch_area), 3))
+        for c in range(3):
+            out[:, c] = np.bincount(p, weights=w * values[rows, c], minlength=len(self.patch_area))
+        return out
+
+
+def patch_average_matrix(mesh: RadiosityMesh) -> np.ndarray:
+    """(P, R) float64 dense W: patch radiosity as the area-weighted mean of its receivers."""
+    problem = _Problem.from_mesh(mesh)
+    matrix = np.zeros((mesh.patch_count, mesh.receiver_count))
+    rows = np.repeat(np.arange(mesh.receiver_count), np.diff(problem.receiver_ptr))
+    matrix[problem.entry_patch, rows] = problem.entry_weight
+    return matrix
+
+
+def new_state(mesh: RadiosityMesh, problem: _Problem | None = None) -> SolverState:
+    """The state before any shot: patches hold their emission as unshot radiosity."""
+    problem = problem or _Problem.from_mesh(mesh)
+    everyone = np.arange(mesh.receiver_count)
+    return SolverState(
+        irradiance=np.zeros((mesh.receiver_count, 3)),
+        patch_radiosity=problem.average(everyone, mesh.receiver_emitted_exitance),
+        shot=np.zeros((mesh.patch_count, 3)),
+        captured=np.full(mesh.patch_count, np.nan),
+    )
+
+
+def check_solvable(mesh: RadiosityMesh) -> None:
+    """Refuse systems without a finite solution before any work.
+
+    In a channel where every patch reflects everything (reflectance 1) and something
+    emits, no energy is ever lost in a closed scene: the radiosity grows without bound.
+    """
+    emits: list[bool] = np.any(mesh.receiver_emitted_exitance > 0, axis=0).tolist()
+    lossless: list[bool] = np.all(mesh.patch_reflectance >= 1.0, axis=0).tolist()
+    bad = [name for c, name in enumerate("RGB") if emits[c] and lossless[c]]
+    if bad:
+        raise SolverError(
+            f"every surface has reflectance 1 in channel {', '.join(bad)}: a closed scene "
+            "then has no finite solution (lower the reflectance below 1)"
+        )
+
+
+def solve(
+    mesh: RadiosityMesh,
+    engine: FormFactorEngine,
+    settings: SolveSettings | None = None,
+    state: SolverState | None = None,
+    progress: Callable[[SolverState, float], None] | None = None,
+    stop: Callable[[], bool] | None = None,
+) -> SolveResult:
+    """Solve the radiosity system of ``mesh`` by shooting.
+
+    Parameters
+    ----------
+    mesh : RadiosityMesh
+    engine : FormFactorEngine
+        Supplies the form-factor column of each shooting patch.
+    settings : SolveSettings
+        Method and stopping rules.
+    state : SolverState or None
+        A state to resume from (as saved by :mod:`raytrad.outputs.resume`); None starts
+        afresh.
+    progress : callable or None
+        Called as ``progress(state, residual)`` after each shot.
+    stop : callable or None
+        Polled before each shot; True ends the solve with reason ``interrupted`` and a
+        consistent state (the CLI sets it on Ctrl-C, so the run can be resumed).
+
+    Returns
+    -------
+    SolveResult
+    """
+    settings = settings or SolveSettings()
+    check_solvable(mesh)
+    problem = _Problem.from_mesh(mesh)
+    state = state or new_state(mesh, problem)
+    amount_of = SHOOTING_METHODS[settings.method].amount
+    area = problem.patch_area
+    emitted = area @ problem.average(np.arange(mesh.receiver_count), problem.receiver_emission)
+    emitted_total = float(emitted.sum())
+    start = time.perf_counter() - state.seconds
+    rays_before = state.rays  # from a checkpoint; the engine counts this run's rays
+    reason = "no-emission" if emitted_total <= 0 else ""
+    residual = 0.0
+    while not reason:
+        residual = float((area @ np.abs(state.unshot)).sum()) / emitted_total
+        reason = _stop_reason(state, settings, residual, time.perf_counter() - start)
+        if not reason and stop is not None and stop():
+            reason = "interrupted"
+        if reason:
+            break
+        amount = amount_of(problem, state, settings)
+        magnitude = area * np.abs(amount).sum(axis=1)
+        patch = int(np.argmax(magnitude))
+        if magnitude[patch] <= 0:
+            reason = "converged"
+            break
+        _shoot(problem, state, engine.column(patch), patch, amount[patch])
+        state.rays = rays_before + engine.rays_cast
+        state.seconds = time.perf_counter() - start
+        _guard_growth(state, area, settings)
+        _check_divergence(state, area, emitted_total)
+        if progress is not None:
+            progress(state, residual)
+    state.seconds = time.perf_counter() - start
+    state.rays = rays_before + engine.rays_cast
+    residual = float((area @ np.abs(state.unshot)).sum()) / emitted_total if emitted_total else 0.0
+    radiosity = problem.receiver_emission + problem.receiver_reflectance * state.irradiance
+    if not np.isfinite(radiosity).all():
+        raise SolverError("the solve produced non-finite radiosity")
+    return SolveResult(
+        radiosity=radiosity,
+        state=state,
+        stop_reason=reason,
+        residual=residual,
+        emitted_power=emitted,
+        unshot_power=area @ state.unshot,
+        method=settings.method,
+    )
+
+
+def _stop_reason(
+    state: SolverState, settings: SolveSettings, residual: float, elapsed: float
+) -> str:
+    if residual <= settings.tolerance:
+        return "converged"
+    if settings.max_shots is not None and state.shots >= settings.max_shots:
+        return "max-shots"
+    if settings.time_limit is not None and elapsed >= settings.time_limit:
+        return "time-limit"
+    return ""
+
+
+def _shoot(
+    problem: _Problem, state: SolverState, column: Column, patch: int, amount: np.ndarray
+) -> None:
+    """Shoot ``amount`` ((3,) [W m-2]) from ``patch`` through its form-factor column."""
+    j, f = column.receivers, column.factors
+    area_p = problem.patch_area[patch]
+    irradiance = f[:, None] * amount[None, :]  # (K, 3)
+    state.irradiance[j] += irradiance
+    reflected = problem.receiver_reflectance[j] * irradiance
+    state.patch_radiosity += problem.average(j, reflected)
+    state.shot[patch] += amount
+    a = problem.receiver_area[j]
+    caught = a @ irradiance  # (3,) power landing on receivers [W]
+    state.absorbed += caught - a @ reflected
+    state.escaped += area_p * amount - caught
+    state.captured[patch] = float(a @ f) / area_p
+    state.shots += 1
+
+
+#: Unshot power beyond this multiple of the emitted power means divergence: overshooting
+#: legitimately leaves unshot power of order rho / (1 - rho) times the emitted power.
+DIVERGENCE_LIMIT = 1e9
+
+
+def _check_divergence(state: SolverState, area: np.ndarray, emitted_total: float) -> None:
+    """Raise when the unshot power has grown past any legitimate overshoot.
+
+    That happens only when the discrete system has no finite solution: some closed set of
+    surfaces returns more than it receives (reflectance times form-factor sum >= 1).
+    """
+    total = float((area @ np.abs(state.unshot)).sum())
+    if not np.isfinite(total) or total > DIVERGENCE_LIMIT * emitted_total:
+        raise SolverError(
+            f"the solve diverged after {state.shots} shots: the unshot power grew to "
+            f"{total / emitted_total:.3g} times the emitted power; the scene reflects more "
+            "than it receives somewhere (reflectance times form-factor sum >= 1)"
+        )
+
+
+def _guard_growth(state: SolverState, area: np.ndarray, settings: SolveSettings) -> None:
+    """Halve the overshoot of a damped method when the unshot power grows well past its
+    minimum.
+
+    Shooting never increases the absolute unshot power unless it overshoots by more than the
+    iteration tolerates (the omega >= 2 regime); growth is the sign of divergence.
+    """
+    if not SHOOTING_METHODS[settings.method].damped:
+        return
+    total = float((area @ np.abs(state.unshot)).sum())
+    if total < state.min_unshot:
+        state.min_unshot = total
+    elif total > 4.0 * state.min_unshot and state.ambient_gain > 1e-3:
+        state.ambient_gain *= 0.5
+        state.damping_events += 1
+        state.min_unshot = total
+        log.info("unshot power grew; ambient overshoot damped to %.3g", state.ambient_gain)

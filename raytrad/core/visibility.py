@@ -1,0 +1,348 @@
+"""Visibility between points: the one adapter module that imports embreex.
+
+Embree works in float32. Coordinates are shifted so the scene's bounding-box centre is the
+origin before conversion, so a model placed kilometres from the origin keeps the same
+precision as one at the origin; every query point goes through the same shift.
+"""
+
+from __future__ import annotations
+
+import itertools
+import logging
+import math
+import os
+import threading
+from concurrent.futures import ThreadPoolExecutor
+
+import numpy as np
+
+from raytrad.constants import scene_diagonal, tol
+
+log = logging.getLogger(__name__)
+
+#: Rays handed to Embree in one call; one chunk's arrays stay a few megabytes.
+RAY_CHUNK = 1 << 16
+
+_MISS, _FRONT, _BACK = 0, 1, 2
+
+
+def worker_count() -> int:
+    """Threads for ray batches: every core the process may use."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except AttributeError:  # pragma: no cover - not Linux
+        return max(1, os.cpu_count() or 1)
+
+
+class Occluder:
+    """Segment occlusion queries against a triangle mesh.
+
+    Parameters
+    ----------
+    positions : (V, 3) float64
+        Vertex positions [m].
+    triangles : (T, 3) int
+        Triangles that can block light.
+    robust : bool
+        Embree's robust traversal mode (slower; watertight edges).
+
+    Notes
+    -----
+    ``embreex.EmbreeScene.run`` releases the GIL, so batches run on all cores from a thread
+    pool; each call gets at most :data:`RAY_CHUNK` rays, so memory stays bounded.
+    """
+
+    def __init__(self, positions: np.ndarray, triangles: np.ndarray, robust: bool = False):
+        from embreex import rtcore_scene
+        from embreex.mesh_construction import TriangleMesh
+
+        positions = np.asarray(positions, dtype=np.float64)
+        used = np.unique(triangles)
+        lo, hi = positions[used].min(axis=0), positions[used].max(axis=0)
+        self.origin = 0.5 * (lo + hi)
+        self.diagonal = scene_diagonal(np.stack([lo, hi]))
+        self._scene = rtcore_scene.EmbreeScene(robust=robust)
+        local = np.ascontiguousarray(positions - self.origin, dtype=np.float32)
+        TriangleMesh(self._scene, local, np.ascontiguousarray(triangles, dtype=np.int32))
+        self._workers = worker_count()
+        self._pool: ThreadPoolExecutor | None = None
+        self._lock = threading.Lock()
+        self.rays_cast = 0
+        # the first query commits (builds) the BVH; do it now so timings are honest
+        self._scene.run(
+            np.zeros((1, 3), np.float32),
+            np.full((1, 3), 3.0**-0.5, np.float32),
+            dists=np.zeros(1, np.float32),
+            query="OCCLUDED",
+        )
+
+    def close(self) -> None:
+        if self._pool is not None:
+            self._pool.shutdown()
+            self._pool = None
+
+    def __enter__(self) -> Occluder:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def to_local(self, points: np.ndarray) -> np.ndarray:
+        """(N, 3) float64 world points [m] to the float32-friendly local frame [m]."""
+        return np.asarray(points, dtype=np.float64) - self.origin
+
+    def occluded_local(
+        self, origins: np.ndarray, directions: np.ndarray, distances: np.ndarray
+    ) -> np.ndarray:
+        """Occlusion of rays already in the local frame.
+
+        Parameters
+        ----------
+        origins : (N, 3) float
+            Ray origins in the local frame [m].
+        directions : (N, 3) float
+            Unit directions.
+        distances : (N,) float
+            Segment lengths [m]; hits beyond them do not count.
+
+        Returns
+        -------
+        (N,) bool, True where something blocks the open segment.
+        """
+        n = len(origins)
+        with self._lock:
+            self.rays_cast += n
+        if n == 0:
+            return np.zeros(0, dtype=bool)
+        o = np.ascontiguousarray(origins, dtype=np.float32)
+        d = np.ascontiguousarray(directions, dtype=np.float32)
+        t = np.ascontiguousarray(distances, dtype=np.float32)
+        if n <= RAY_CHUNK or self._workers == 1:
+            return self._run(o, d, t)
+        bounds = [*list(range(0, n, RAY_CHUNK)), n]
+        if self._pool is None:
+            self._pool = ThreadPoolExecutor(self._workers, thread_name_prefix="raytrad-rays")
+        parts = self._pool.map(
+            lambda ab: self._run(o[ab[0] : ab[1]], d[ab[0] : ab[1]], t[ab[0] : ab[1]]),
+            itertools.pairwise(bounds),
+        )
+        return np.concatenate(list(parts))
+
+    def _run(self, o: np.ndarray, d: np.ndarray, t: np.ndarray) -> np.ndarray:
+        out = np.empty(len(o), dtype=bool)
+        for start in range(0, len(o), RAY_CHUNK):
+            stop = start + RAY_CHUNK
+            hit = self._scene.run(
+                o[start:stop], d[start:stop], dists=t[start:stop].copy(), query="OCCLUDED"
+            )
+            out[start:stop] = np.asarray(hit) != -1
+        return out
+
+    def intersect_local(
+        self, origins: np.ndarray, directions: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Closest hits of rays in the local frame.
+
+        Parameters
+        ----------
+        origins : (N, 3) float
+            Ray origins in the local frame [m].
+        directions : (N, 3) float
+            Unit directions.
+
+        Returns
+        -------
+        triangle : (N,) int64, index of the triangle hit, -1 for a miss
+        distance : (N,) float64, distance to the hit [m] (inf for a miss)
+        """
+        o = np.ascontiguousarray(origins, dtype=np.float32)
+        d = np.ascontiguousarray(directions, dtype=np.float32)
+        with self._lock:
+            self.rays_cast += len(o)
+        triangle, distance, _ = self.intersect_barycentric_local(o, d)
+        return triangle, distance
+
+    def intersect_barycentric_local(
+        self, origins: np.ndarray, directions: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Closest hits with the hit point's barycentric coordinates.
+
+        Returns
+        -------
+        triangle : (N,) int64, -1 for a miss
+        distance : (N,) float64 [m], inf for a miss
+        barycentric : (N, 3) float64, weights of the triangle's corners 0, 1, 2
+        """
+        o = np.ascontiguousarray(origins, dtype=np.float32)
+        d = np.ascontiguousarray(directions, dtype=np.float32)
+        triangle = np.empty(len(o), dtype=np.int64)
+        distance = np.empty(len(o))
+        weights = np.zeros((len(o), 3))
+        for start in range(0, len(o), RAY_CHUNK):
+            stop = start + RAY_CHUNK
+            hit = self._scene.run(o[start:stop], d[start:stop], query="INTERSECT", output=True)
+            triangle[start:stop] = hit["primID"]
+            distance[start:stop] = np.where(hit["primID"] >= 0, hit["tfar"], np.inf)
+            u, v = np.asarray(hit["u"], np.float64), np.asarray(hit["v"], np.float64)
+            weights[start:stop] = np.stack([1.0 - u - v, u, v], axis=1)
+        return triangle, distance, weights
+
+    def enclosed(
+        self,
+        points: np.ndarray,
+        normals: np.ndarray,
+        triangle_normals: np.ndarray,
+        double_sided: np.ndarray,
+        rays: int = 16,
+    ) -> np.ndarray:
+        """Which surface points are shut in: every ray from them hits a back face.
+
+        A floor point under a closed block sees only the block's inside (the backs of its
+        single-sided faces) in every direction: it can neither receive nor send light.
+
+        Parameters
+        ----------
+        points : (N, 3) float64
+            World points [m] on surfaces.
+        normals : (N, 3) float64
+            Their unit normals.
+        triangle_normals : (T, 3) float64
+            Unit normals of this occluder's triangles.
+        double_sided : (T,) bool
+            Triangles that have no back.
+        rays : int
+            Directions tried per point (a fixed stratified cosine set).
+
+        Returns
+        -------
+        (N,) bool
+        """
+        hits = self._hemisphere_hits(points, normals, triangle_normals, double_sided, rays)
+        return (hits == _BACK).all(axis=1)
+
+    def probe_hemispheres(
+        self,
+        points: np.ndarray,
+        normals: np.ndarray,
+        triangle_normals: np.ndarray,
+        double_sided: np.ndarray,
+        rays: int = 64,
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """(closed, enclosed), both (N,) bool, from one set of probe rays.
+
+        ``closed``: every ray hits the front of a surface, so the point sees no opening and
+        no light-swallowing back face and its form factors must sum to 1
+        (``FormFactorEngine.balance``); ``enclosed``: every ray hits a back face
+        (:meth:`enclosed`). Parameters as :meth:`enclosed`.
+        """
+        hits = self._hemisphere_hits(points, normals, triangle_normals, double_sided, rays)
+        return (hits == _FRONT).all(axis=1), (hits == _BACK).all(axis=1)
+
+    def _hemisphere_hits(
+        self,
+        points: np.ndarray,
+        normals: np.ndarray,
+        triangle_normals: np.ndarray,
+        double_sided: np.ndarray,
+        rays: int,
+    ) -> np.ndarray:
+        """(N, rays) int8: _MISS, _FRONT or _BACK for a fixed cosine set of directions."""
+        directions = _fibonacci_hemisphere(rays)  # (K, 3) about +z
+        origin = self.to_local(points) + tol.ray_margin * self.diagonal * normals
+        tangent, bitangent = _frames(normals)
+        out = np.empty((len(points), rays), dtype=np.int8)
+        for k in range(rays):
+            d = (
+                directions[k, 0] * tangent
+                + directions[k, 1] * bitangent
+                + directions[k, 2] * normals
+            )
+            hit, _ = self.intersect_local(origin, d)
+            ok = hit >= 0
+            back = np.zeros(len(hit), dtype=bool)
+            # a grazing hit (the ray along the surface) counts as its front
+            grazing = tol.parallel
+            back[ok] = (np.einsum("ij,ij->i", triangle_normals[hit[ok]], d[ok]) > grazing) & (
+                ~double_sided[hit[ok]]
+            )
+            out[:, k] = np.where(~ok, _MISS, np.where(back, _BACK, _FRONT))
+        return out
+
+    def occluded(
+        self, starts: np.ndarray, ends: np.ndarray, end_normals: np.ndarray | None = None
+    ) -> np.ndarray:
+        """(N,) bool: is the open segment between world points ``starts`` and ``ends`` blocked?
+
+        Parameters
+        ----------
+        starts, ends : (N, 3) float64
+            Segment end points [m].
+        end_normals : (N, 3) float64 or None
+            Unit normals of the surfaces the segments end on, on the side they arrive from.
+            Give them whenever ``ends`` lie on a surface: each end is then lifted off it by
+            ``tol.ray_offset`` of the scene diagonal, so a grazing segment is not blocked by
+            the very surface it ends on (float32 cannot resolve a margin taken along the
+            segment).
+
+        Only the interior of the segment counts: a margin of ``tol.ray_margin`` of the
+        scene diagonal is left free at the end.
+        """
+        ends = np.asarray(ends, dtype=np.float64)
+        if end_normals is not None:
+            lift = tol.ray_offset * self.diagonal
+            ends = ends + lift * np.asarray(end_normals, dtype=np.float64)
+        a = self.to_local(starts)
+        delta = self.to_local(ends) - a
+        length = np.linalg.norm(delta, axis=1)
+        direction = delta / np.maximum(length, 1e-300)[:, None]
+        margin = tol.ray_margin * self.diagonal
+        return self.occluded_local(a, direction, np.maximum(length - margin, 0.0))
+
+
+def nothing_can_occlude(positions: np.ndarray, triangles: np.ndarray, tolerance: float) -> bool:
+    """True when no segment between two scene points can cross a triangle.
+
+    That holds when every vertex lies on or in front of every triangle's plane: the scene is
+    the inside of a convex shell (a furnace box, a sphere seen from inside). Such a scene
+    needs no visibility rays at all.
+
+    Parameters
+    ----------
+    positions : (V, 3) float64 [m]
+    triangles : (T, 3) int
+    tolerance : float
+        Distance behind a plane still counted as on it [m].
+    """
+    points = positions[np.unique(triangles)]
+    if len(points) * len(triangles) > 50_000_000:
+        return False  # too big to prove convex cheaply; rays decide instead
+    corners = positions[triangles]
+    normal = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+    length = np.linalg.norm(normal, axis=1)
+    ok = length > 0
+    normal = normal[ok] / length[ok, None]
+    offset = np.einsum("ij,ij->i", normal, corners[ok, 0])
+    for start in range(0, len(normal), 256):
+        sl = slice(start, start + 256)
+        signed = points @ normal[sl].T - offset[sl][None, :]
+        if (signed < -tolerance).any():
+            return False
+    return True
+
+
+def _fibonacci_hemisphere(count: int) -> np.ndarray:
+    """(count, 3) unit directions spread evenly over the +z hemisphere, cosine-weighted."""
+    i = np.arange(count) + 0.5
+    radius = np.sqrt(i / count)
+    angle = i * math.pi * (3.0 - math.sqrt(5.0))
+    return np.stack(
+        [radius * np.cos(angle), radius * np.sin(angle), np.sqrt(1.0 - radius**2)], axis=1
+    )
+
+
+def _frames(normals: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Two unit tangents completing each (N, 3) unit normal to an orthonormal frame."""
+    helper = np.where(np.abs(normals[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
+    tangent = np.cross(normals, helper)
+    tangent /= np.linalg.norm(tangent, axis=1)[:, None]
+    return tangent, np.cross(normals, tangent)

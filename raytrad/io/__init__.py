@@ -1,1 +1,0 @@
-"""Reading and writing files: scene loaders, radiosity PLY output and atomic file writes."""

@@ -1,0 +1,103 @@
+"""Resuming a stopped solve: its state saved with the fingerprint of the system it solves.
+
+The fingerprint covers what the solve depends on: the loaded scene's geometry and
+materials (:func:`raytrad.scene.scene_digests`, so an edited ``.mtl`` beside an OBJ or an
+edited mesh file of a TOML scene counts, not only the bytes of the file named on the
+command line) and the settings that shape the discrete system. A resume against anything
+else is refused with one line saying what changed.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+from typing import Any
+
+from raytrad.core.solver import SolverState
+from raytrad.errors import RaytradError
+from raytrad.formats.checkpoint import read_checkpoint, write_checkpoint
+from raytrad.scene import Scene, scene_digests
+
+#: Version of the checkpoint layout; a checkpoint of another layout is refused.
+LAYOUT = 2
+
+
+def fingerprint(scene: Scene, system_settings: dict[str, Any]) -> dict[str, Any]:
+    """What a checkpoint must match to be resumed: scene digests and system settings.
+
+    Parameters
+    ----------
+    scene : Scene
+        The scene as loaded (before repair: repair is a function of it).
+    system_settings : dict
+        The settings that define the discrete system
+        (:meth:`raytrad.settings.RenderSettings.system_settings`), plain values.
+    """
+    return {"layout": LAYOUT, "settings": _flat(system_settings), **scene_digests(scene)}
+
+
+def save_state(path: str | os.PathLike[str], state: SolverState, key: dict[str, Any]) -> None:
+    """Write ``state`` and its fingerprint ``key`` to ``path`` atomically."""
+    arrays, scalars = state.to_record()
+    write_checkpoint(path, arrays, {"fingerprint": key, "scalars": scalars})
+
+
+def load_state(path: str | os.PathLike[str], key: dict[str, Any]) -> SolverState:
+    """The state saved in ``path``, if it was saved for the system ``key`` describes.
+
+    Raises
+    ------
+    RaytradError
+        The file is unreadable, or was made for another system: the message names the
+        first difference (a setting, a material, an object of the scene).
+    """
+    arrays, record = read_checkpoint(path)
+    saved = record.get("fingerprint")
+    change = difference(saved, key) if isinstance(saved, dict) else "its format is unknown"
+    if change:
+        raise RaytradError(
+            f"{path}: cannot resume: {change} since the checkpoint was made; delete it or "
+            "run without --resume"
+        )
+    try:
+        return SolverState.from_record(arrays, record["scalars"])
+    except (KeyError, TypeError, ValueError) as exc:
+        raise RaytradError(f"{path}: cannot read checkpoint (missing {exc})") from exc
+
+
+def difference(saved: dict[str, Any], current: dict[str, Any]) -> str:
+    """The first way ``current`` differs from ``saved``, in words; "" when they match."""
+    if saved.get("layout") != current.get("layout"):
+        return "the checkpoint layout changed (it was made by another raytrad version)"
+    for name, value in current["settings"].items():
+        before = saved.get("settings", {}).get(name)
+        if before != value:
+            return f"setting {name} changed ({before} -> {value})"
+    for group, what in (("materials", "material"), ("objects", "mesh")):
+        before, now = saved.get(group, {}), current[group]
+        for name in now:
+            if name not in before:
+                return f"the scene gained {what} {name!r}"
+            if before[name] != now[name]:
+                detail = " (reflectance, emission or sidedness)" if what == "material" else ""
+                return f"{what} {name!r} changed{detail}"
+        for name in before:
+            if name not in now:
+                return f"the scene lost {what} {name!r}"
+    return ""
+
+
+def _flat(settings: dict[str, Any], prefix: str = "") -> dict[str, Any]:
+    """Nested settings as ``{"mesh.receivers": 20000, ...}`` (JSON-ready values)."""
+    out: dict[str, Any] = {}
+    for name, value in settings.items():
+        if isinstance(value, dict):
+            out.update(_flat(value, f"{prefix}{name}."))
+        else:
+            out[f"{prefix}{name}"] = value
+    return out
+
+
+def checkpoint_path(output_dir: Path, stem: str) -> Path:
+    """Where a run's checkpoint lives: ``<output_dir>/<stem>.checkpoint.npz``."""
+    return output_dir / f"{stem}.checkpoint.npz"

@@ -1,0 +1,115 @@
+"""Writing the files a render asks for: the radiosity PLY, lightmaps, the camera image and
+the baked model, all from one solve and one exposure.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from raytrad.constants import defaults
+from raytrad.core.pipeline import Prepared
+from raytrad.core.solver import SolveResult
+from raytrad.formats.images import write_exr, write_png
+from raytrad.formats.ply import write_radiosity_ply
+from raytrad.outputs.gltf import baked_parts, write_baked_glb
+from raytrad.outputs.lightmaps import write_lightmaps
+from raytrad.products.display import auto_exposure, display_colors, display_encode, fill_hidden
+from raytrad.products.framing import image_view
+from raytrad.products.image import render_radiance
+from raytrad.products.lightmap import Lightmap, bake_lightmaps
+from raytrad.scene import NamedCamera
+from raytrad.settings import ImageSettings, RenderSettings
+
+
+def write_outputs(
+    prepared: Prepared,
+    result: SolveResult,
+    output_dir: Path,
+    stem: str,
+    settings: RenderSettings,
+    camera: NamedCamera | None = None,
+) -> tuple[dict[str, Path], dict[str, Any]]:
+    """Write every asked-for output; return their paths and facts for the report.
+
+    Parameters
+    ----------
+    prepared : Prepared
+    result : SolveResult
+    output_dir : Path
+    stem : str
+        File names start with it (``<stem>.ply``...).
+    settings : RenderSettings
+        Resolved (:func:`raytrad.settings.with_scene_defaults`).
+    camera : NamedCamera or None
+        The scene file's camera for ``--image``, if it has one.
+
+    Returns
+    -------
+    outputs : dict of str to Path
+        Each written file by key (``ply``, ``lightmap``, ``image``, ``gltf``...).
+    facts : dict
+        The exposure, lightmap statistics and camera, for ``report.json``.
+    """
+    mesh = prepared.mesh
+    emitting = np.asarray((mesh.receiver_emitted_exitance > 0).any(axis=1))
+    # hidden receivers take their visible neighbours' radiosity in what is shown
+    shown = fill_hidden(mesh, result.radiosity)
+    area = mesh.receiver_area
+    stops = settings.exposure or 0.0
+    exposure = auto_exposure(shown, emitting, area) * 2.0**stops
+    colors = display_colors(shown, emitting, stops, area)
+    outputs = {"ply": output_dir / f"{stem}.ply"}
+    facts: dict[str, Any] = {"exposure": exposure}
+    write_radiosity_ply(
+        outputs["ply"], mesh.receiver_position, mesh.triangle_receivers, result.radiosity, colors
+    )
+    metadata = {"scene": str(prepared.scene.source or stem), "method": result.method}
+    lightmaps: list[Lightmap] = []
+    previews: list[Path] = []
+    if settings.lightmap is not None:
+        lightmaps = bake_lightmaps(prepared.scene, mesh, shown, settings.lightmap)
+        previews = write_lightmaps(lightmaps, output_dir, stem, metadata, exposure, outputs, facts)
+    if settings.image is not None:
+        facts["camera"] = _write_image(
+            prepared, shown, settings.image, camera, exposure, metadata, output_dir / stem, outputs
+        )
+    if settings.gltf:
+        outputs["gltf"] = output_dir / f"{stem}.glb"
+        pngs = [preview.read_bytes() for preview in previews]  # the PNGs just written
+        parts = baked_parts(prepared.scene, mesh, shown, exposure, lightmaps, pngs)
+        write_baked_glb(outputs["gltf"], parts, exposure)
+    return outputs, facts
+
+
+def _write_image(
+    prepared: Prepared,
+    radiosity: np.ndarray,
+    image: ImageSettings,
+    camera: NamedCamera | None,
+    exposure: float,
+    metadata: dict[str, str],
+    base: Path,
+    outputs: dict[str, Path],
+) -> dict[str, Any]:
+    """Render and write ``<base>.exr`` (linear radiance) and ``<base>.png``; the camera."""
+    height = image.height or defaults.image_height
+    view, width, origin = image_view(prepared.mesh, image.camera, camera, image.width, height)
+    radiance = render_radiance(prepared.mesh, radiosity, view, width, height, image.samples)
+    outputs["image"] = base.with_name(base.name + ".exr")
+    outputs["image_preview"] = base.with_name(base.name + ".png")
+    write_exr(
+        outputs["image"],
+        radiance,
+        half=False,
+        metadata={
+            "raytrad:units": "W sr-1 m-2",
+            "raytrad:quantity": "radiance",
+            **{f"raytrad:{k}": v for k, v in metadata.items()},
+        },
+    )
+    write_png(outputs["image_preview"], display_encode(radiance * exposure, image.tonemap))
+    return {**dataclasses.asdict(view), "name": origin}

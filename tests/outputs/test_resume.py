@@ -1,0 +1,148 @@
+"""Resuming a stopped solve: the fingerprint covers the loaded scene and the system
+settings, so a resume after editing a file the scene is made of (an ``.mtl`` beside an
+OBJ, a mesh file of a TOML scene) is refused with one line saying what changed."""
+
+from __future__ import annotations
+
+import itertools
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from raytrad import api
+from raytrad.core.solver import SolverState
+from raytrad.errors import RaytradError
+from raytrad.outputs.resume import difference, fingerprint, load_state, save_state
+from raytrad.scene.builtin import cornell_box, furnace_box
+from raytrad.scenefiles import write_obj
+from raytrad.settings import MeshSettings, RenderSettings
+from tests.conftest import run_cli
+
+SETTINGS = RenderSettings(mesh=MeshSettings(receivers=600, patches=40))
+SMALL = ["--receivers", "600", "--patches", "40", "-q"]
+
+
+def _stopped_render(scene: Path, out: Path, shots: int = 5) -> Path:
+    """Render ``scene`` into ``out``, stopped after ``shots`` shots; the checkpoint."""
+    polls = itertools.count()
+    outcome = api.render(scene, out, SETTINGS, stop=lambda: next(polls) >= shots)
+    assert outcome.result.stop_reason == "interrupted"
+    return outcome.outputs["checkpoint"]
+
+
+def _resume(scene: Path, out: Path, capsys: pytest.CaptureFixture[str]) -> tuple[int, str]:
+    status, _, err = run_cli(["render", str(scene), "-o", str(out), *SMALL, "--resume"], capsys)
+    return status, err
+
+
+def _state(seed: int) -> SolverState:
+    rng = np.random.default_rng(seed)
+    return SolverState(
+        irradiance=rng.random((7, 3)),
+        patch_radiosity=rng.random((3, 3)),
+        shot=rng.random((3, 3)),
+        captured=np.array([0.5, np.nan, 1.0]),
+        shots=11,
+        rays=1234,
+        seconds=2.5,
+        absorbed=rng.random(3),
+        escaped=rng.random(3),
+        ambient_gain=0.25,
+        min_unshot=0.125,
+        damping_events=2,
+    )
+
+
+def test_state_round_trips_bit_for_bit(tmp_path: Path) -> None:
+    key = fingerprint(furnace_box(), SETTINGS.system_settings())
+    state = _state(1)
+    save_state(tmp_path / "a.npz", state, key)
+    back = load_state(tmp_path / "a.npz", key)
+    for name in SolverState.ARRAYS:
+        np.testing.assert_array_equal(getattr(back, name), getattr(state, name))
+    for name in SolverState.SCALARS:
+        assert getattr(back, name) == getattr(state, name)
+
+
+def test_edited_mtl_is_refused_naming_the_material(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    scene = tmp_path / "cornell.obj"
+    write_obj(cornell_box(), scene)
+    out = tmp_path / "out"
+    checkpoint = _stopped_render(scene, out)
+    mtl = scene.with_suffix(".mtl")
+    text = mtl.read_text()
+    assert "Kd 0.63 0.065 0.05" in text
+    mtl.write_text(text.replace("Kd 0.63 0.065 0.05", "Kd 0.5 0.065 0.05"))  # red wall
+    status, err = _resume(scene, out, capsys)
+    assert status == 1
+    assert len(err.strip().splitlines()) == 1
+    assert "material 'red' changed" in err and str(checkpoint) in err
+    assert checkpoint.is_file()  # refused: nothing touched
+
+
+def test_edited_toml_mesh_file_is_refused_naming_the_mesh(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    write_obj(furnace_box(0.5, 1.0), tmp_path / "box.obj")
+    scene = tmp_path / "room.toml"
+    scene.write_text('[[mesh]]\nfile = "box.obj"\nname = "room"\n')
+    out = tmp_path / "out"
+    _stopped_render(scene, out)
+    obj = tmp_path / "box.obj"
+    obj.write_text(obj.read_text().replace("v 1.0 1.0 1.0", "v 1.0 1.25 1.0"))
+    status, err = _resume(scene, out, capsys)
+    assert status == 1 and len(err.strip().splitlines()) == 1
+    assert "mesh 'room' changed" in err
+
+
+def test_unchanged_files_resume(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    scene = tmp_path / "cornell.obj"
+    write_obj(cornell_box(), scene)
+    out = tmp_path / "out"
+    checkpoint = _stopped_render(scene, out)
+    scene.touch()  # a new modification time and the same content resume fine
+    status, err = _resume(scene, out, capsys)
+    assert status == 0, err
+    assert not checkpoint.exists()
+
+
+def test_scale_change_is_named(tmp_path: Path) -> None:
+    key = fingerprint(furnace_box(), SETTINGS.system_settings())
+    scaled = RenderSettings(mesh=SETTINGS.mesh, scale=0.5)
+    other = fingerprint(furnace_box(), scaled.system_settings())
+    assert difference(key, other) == "setting scale changed (1.0 -> 0.5)"
+    save_state(tmp_path / "a.npz", _state(2), key)
+    with pytest.raises(RaytradError, match=r"setting scale changed \(1.0 -> 0.5\)"):
+        load_state(tmp_path / "a.npz", other)
+
+
+@pytest.mark.parametrize(
+    ("edit", "expected"),
+    [
+        ("receivers", "setting mesh.receivers changed (600 -> 700)"),
+        ("object", "the scene gained material 'white'"),
+        ("same", ""),
+    ],
+)
+def test_difference_names_the_first_change(edit: str, expected: str) -> None:
+    scene = furnace_box()
+    key = fingerprint(scene, SETTINGS.system_settings())
+    settings = SETTINGS
+    if edit == "receivers":
+        settings = RenderSettings(mesh=MeshSettings(receivers=700, patches=40))
+    if edit == "object":
+        scene = cornell_box()
+    assert difference(key, fingerprint(scene, settings.system_settings())).startswith(expected)
+
+
+def test_checkpoint_of_an_old_layout_is_refused(tmp_path: Path) -> None:
+    from raytrad.formats.checkpoint import write_checkpoint
+
+    arrays, scalars = _state(3).to_record()
+    write_checkpoint(tmp_path / "old.npz", arrays, {"fingerprint": "0123abcd", "scalars": scalars})
+    key = fingerprint(furnace_box(), SETTINGS.system_settings())
+    with pytest.raises(RaytradError, match="format is unknown"):
+        load_state(tmp_path / "old.npz", key)
