@@ -1,7 +1,7 @@
 """How wrong is the solve now: an error log with an estimate, a guaranteed bound and, when a
 reference is known, the true error. The derivation of the bound is in ``docs/error.md``.
 
-Notation (see :mod:`raytrad.solver`): patch unshot radiosity dB_p, patch area A_p, receiver
+Notation (see :mod:`raytrad.core.solver`): patch unshot radiosity dB_p, patch area A_p, receiver
 area a_j, reflectance rho_j, form factors F_jp, capture fraction g_p = sum_j a_j F_jp / A_p.
 """
 

@@ -39,7 +39,7 @@ def form_factor_matrix(engine: FormFactorEngine) -> np.ndarray:
 
 
 def dense_solve(mesh: RadiosityMesh, engine: FormFactorEngine) -> np.ndarray:
-    """Direct solution of equation (1) of :mod:`raytrad.solver`.
+    """Direct solution of equation (1) of :mod:`raytrad.core.solver`.
 
     Solves ``(I - W diag(rho) F) B̄ = W E`` per channel with LAPACK, then
     ``B = E + rho F B̄``.

@@ -22,7 +22,7 @@ from raytrad.scene.model import Scene
 MM = 1e-3
 """Metres per millimetre [m]."""
 
-# Cornell box, REFERENCE.md section 4, in millimetres (y up, open at z = 0).
+# Cornell box (Cornell Program of Computer Graphics data), in mm (y up, open at z = 0).
 CORNELL_FLOOR = ((552.8, 0.0, 0.0), (0.0, 0.0, 0.0), (0.0, 0.0, 559.2), (549.6, 0.0, 559.2))
 CORNELL_CEILING = (
     (556.0, 548.8, 0.0),
@@ -88,7 +88,8 @@ def _block(top_xz: Sequence[Sequence[float]], height: float) -> tuple[np.ndarray
 
 
 def cornell_box() -> Scene:
-    """The Cornell box of REFERENCE.md section 4 in metres, with its usual RGB materials.
+    """The Cornell box (Cornell Program of Computer Graphics data) in metres, with its usual
+    RGB materials.
 
     Walls, floor and ceiling are one quad each, the blocks five quads each (top and four
     sides), the light a quad 0.5 mm below the ceiling facing down. Materials: ``white``
@@ -120,7 +121,7 @@ def cornell_box() -> Scene:
 CORNELL_CAMERA = Camera(
     (0.278, 0.273, -0.800), (0.278, 0.273, 0.0), (0.0, 1.0, 0.0), defaults.vertical_fov_deg
 )
-"""The Cornell box camera of REFERENCE.md [m, degrees]."""
+"""The Cornell box camera of the Cornell data [m, degrees]."""
 
 
 def furnace_box(

@@ -4,7 +4,7 @@ Only the document's JSON is used (:mod:`raytrad.scenefiles.gltf` parses it once,
 geometry and the cameras). The nodes of the default scene are walked from its roots,
 composing each node's local transform (``matrix``, or translation x rotation x scale) into
 a world transform, and every node holding a perspective camera becomes a
-:class:`~raytrad.camera.Camera`. A glTF camera looks along its local -Z axis with +Y up.
+:class:`~raytrad.scene.Camera`. A glTF camera looks along its local -Z axis with +Y up.
 Orthographic cameras are skipped with a warning: raytrad renders pinhole cameras only.
 Every problem with the file is a :class:`~raytrad.errors.SceneError` naming it.
 

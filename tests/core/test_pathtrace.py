@@ -1,6 +1,6 @@
 """The radiosity solution against an independent Monte Carlo path tracer.
 
-The path tracer (:func:`raytrad.reference.path_traced_radiosity`) shares nothing with the
+The path tracer (:func:`raytrad.core.pathtrace.path_traced_radiosity`) shares nothing with the
 solver but the scene and Embree: no form factors, no patches, no receivers. It is itself
 checked on the white furnace, where the answer is known in closed form.
 """
