@@ -16,6 +16,7 @@ Each step lives in its own layer (``docs/architecture.md``): scene files
 from __future__ import annotations
 
 import logging
+import math
 import os
 import time
 from collections.abc import Callable
@@ -23,7 +24,11 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from raytrad.core import pipeline
+from raytrad.core.accuracy import ErrorParts
+from raytrad.core.adaptive import Refinement
 from raytrad.core.compare import MethodRun, run_method
 from raytrad.core.convergence import ConvergenceMonitor, ErrorLog, Reference, ResidualTrend
 from raytrad.core.pipeline import Prepared, timed
@@ -38,7 +43,7 @@ from raytrad.errors import RaytradError, SettingsError
 from raytrad.formats.ply import read_radiosity_ply
 from raytrad.outputs.comparison import markdown_table, write_comparison
 from raytrad.outputs.plot import plot_convergence
-from raytrad.outputs.report import add_error_log, build_report, write_report
+from raytrad.outputs.report import add_error_log, add_total_error, build_report, write_report
 from raytrad.outputs.resume import checkpoint_path, fingerprint, load_state, save_state
 from raytrad.outputs.write import write_outputs
 from raytrad.products.framing import file_camera
@@ -82,13 +87,19 @@ class RenderProgress:
 
 @dataclass
 class RenderOutcome:
-    """What :func:`render` did and wrote."""
+    """What :func:`render` did and wrote.
+
+    ``prepared.mesh`` and ``result.radiosity`` are those of the bake: the refined mesh
+    and its radiosity when adaptive refinement added receivers.
+    """
 
     result: SolveResult
     prepared: Prepared
     outputs: dict[str, Path]
     report: dict[str, Any]
     error_log: ErrorLog
+    refinement: Refinement | None = None
+    error: ErrorParts | None = None
 
 
 def load(path: str | os.PathLike[str], settings: RenderSettings | None = None) -> SceneFile:
@@ -118,9 +129,31 @@ def solve_scene(
     prepared = prepare(scene, settings)
     try:
         result = solve(prepared.mesh, prepared.engine, settings.solve)
+        prepared, result, _ = refine(prepared, result, settings)
     finally:
         prepared.close()
     return prepared, result
+
+
+def refine(
+    prepared: Prepared, result: SolveResult, settings: RenderSettings
+) -> tuple[Prepared, SolveResult, Refinement]:
+    """Adaptive refinement of a solve: the refined mesh (in a copy of ``prepared``), its
+    radiosity (in a copy of ``result``) and what was done
+    (:func:`raytrad.core.pipeline.refine_solution`)."""
+    return pipeline.refine_solution(prepared, result, settings.refine)
+
+
+def estimate_error(
+    solved: Prepared, baked: Prepared, result: SolveResult, error_log: ErrorLog
+) -> ErrorParts:
+    """The bake's total error and its parts (:func:`raytrad.core.pipeline.total_error`).
+
+    ``solved`` holds the mesh that was solved, ``baked`` the (refined) mesh of
+    ``result.radiosity``; the algebraic part is the last estimate of ``error_log``.
+    """
+    estimate = [math.inf if v is None else v for v in error_log.as_dict()["estimate"][-1]]
+    return pipeline.total_error(solved, baked, result, np.asarray(estimate))
 
 
 def make_reference(spec: str, prepared: Prepared) -> Reference:
@@ -229,9 +262,14 @@ def render(
         with timed(timings, "solve"):
             result = solve(prepared.mesh, prepared.engine, settings.solve, state, on_shot, stop)
         error_log = monitor.finish(result.state)
+        solved = prepared
+        with timed(timings, "refine"):
+            baked, result, refinement = refine(prepared, result, settings)
+        with timed(timings, "error"):
+            error = estimate_error(solved, baked, result, error_log)
         with timed(timings, "write"):
             outputs, facts = write_outputs(
-                prepared, result, output_dir, scene_path.stem, settings, camera
+                baked, result, output_dir, scene_path.stem, settings, camera
             )
             if plot:
                 outputs["plot"] = output_dir / "convergence.png"
@@ -241,14 +279,15 @@ def render(
             outputs["checkpoint"] = checkpoint
         elif checkpoint.exists():
             checkpoint.unlink()
-        report = build_report(scene_path, prepared, result, settings, timings, outputs)
+        report = build_report(scene_path, baked, result, settings, timings, outputs)
         report["outputs_detail"] = facts
         add_error_log(report, error_log, ref)
+        add_total_error(report, error_log, error, refinement, solved.mesh.receiver_count)
         write_report(output_dir / "report.json", report)
         outputs["report"] = output_dir / "report.json"
     finally:
         prepared.close()
-    return RenderOutcome(result, prepared, outputs, report, error_log)
+    return RenderOutcome(result, baked, outputs, report, error_log, refinement, error)
 
 
 def _shot_hook(

@@ -19,6 +19,7 @@ from raytrad.settings import (
     ImageSettings,
     LightmapSettings,
     MeshSettings,
+    RefineSettings,
     RenderSettings,
     SettingsError,
     SolveSettings,
@@ -66,8 +67,8 @@ def build_parser() -> argparse.ArgumentParser:
     outputs.add_argument(
         "--lightmap",
         action="store_true",
-        help="bake DIR/<name>.lightmap.exr (radiosity [W m-2], half float) "
-        "with a generated UV atlas, and a preview PNG",
+        help="bake DIR/<name>.lightmap.exr (radiosity [W m-2], half float) in the model's "
+        "lightmap UVs or a generated atlas (see --uv-set), and a preview PNG",
     )
     outputs.add_argument(
         "--lightmap-resolution",
@@ -160,6 +161,23 @@ def build_parser() -> argparse.ArgumentParser:
         action="store_true",
         help="write the baked model DIR/<name>.glb (vertex colours COLOR_0; "
         "with --lightmap also TEXCOORD_1 and the lightmap image)",
+    )
+    refine = render.add_argument_group("adaptive refinement after the solve")
+    refine.add_argument(
+        "--refine-threshold",
+        type=float,
+        default=RefineSettings().threshold,
+        metavar="FRACTION",
+        help="split elements whose corners' radiosity differs by more than this fraction "
+        "of their level (shadow edges, contact lines), gathering the new receivers; 0 "
+        "turns refinement off (default: %(default)s)",
+    )
+    refine.add_argument(
+        "--max-receivers",
+        type=int,
+        default=None,
+        metavar="N",
+        help="receiver budget of the refined mesh (default: twice the solved receivers)",
     )
     render.add_argument(
         "--reference",
@@ -406,7 +424,11 @@ def _uv_set(text: str) -> int | str:
 
 def _output_settings(args: argparse.Namespace) -> dict[str, Any]:
     """Lightmap, image and glTF settings from the options (None: the scene file's value)."""
-    out: dict[str, Any] = {"gltf": args.gltf, "exposure": args.exposure}
+    out: dict[str, Any] = {
+        "gltf": args.gltf,
+        "exposure": args.exposure,
+        "refine": RefineSettings(threshold=args.refine_threshold, max_receivers=args.max_receivers),
+    }
     if args.lightmap or (args.gltf and args.texel_density is not None):
         out["lightmap"] = LightmapSettings(
             resolution=args.lightmap_resolution,
@@ -490,11 +512,11 @@ def _render(args: argparse.Namespace) -> int:
         signal.signal(signal.SIGINT, previous)
         progress.close()
     if not args.quiet:
-        _print_summary(outcome.report)
+        _print_summary(outcome.report, outcome.outputs)
     return 130 if outcome.result.stop_reason == "interrupted" else 0
 
 
-def _print_summary(report: dict[str, Any]) -> None:
+def _print_summary(report: dict[str, Any], outputs: dict[str, Path]) -> None:
     s, stats, t = report["solve"], report["statistics"], report["timings_seconds"]
     total = sum(t.values())
     lines = [
@@ -515,8 +537,22 @@ def _print_summary(report: dict[str, Any]) -> None:
         )
         if error.get("true_rms") is not None:
             text += f", true {max(error['true_rms']):.2e} ({report['reference']['kind']})"
-        lines.append(text + " (relative RMS, worst channel)")
-    lines += [f"wrote      {path}" for path in report["outputs"].values()]
+        lines.append(text + " of the solve (relative RMS, worst channel)")
+    if error.get("total_rms") is not None:
+        parts = ", ".join(
+            f"{name} {_fmt(max(_finite(values)))}" for name, values in error["parts"].items()
+        )
+        lines.append(
+            f"total      {_fmt(max(_finite(error['total_rms'])))} estimated against the "
+            f"physical answer, {error['dominant']} dominates ({parts})"
+        )
+    refinement = report.get("refinement") or {}
+    if refinement.get("receivers_added"):
+        lines.append(
+            f"refined    +{refinement['receivers_added']} receivers in "
+            f"{refinement['rounds']} rounds (solved {refinement['receivers_solved']})"
+        )
+    lines += [f"wrote      {path}" for path in outputs.values()]
     print("\n".join(lines))
 
 

@@ -25,6 +25,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from raytrad.constants import defaults
+from raytrad.core.adaptive import RefineSettings
 from raytrad.core.mesh import MeshSettings
 from raytrad.core.solver import SHOOTING_METHODS, SolveSettings
 from raytrad.errors import SettingsError
@@ -85,6 +86,8 @@ class RenderSettings:
         Discretisation (receivers, patches, samples, seed).
     solve : SolveSettings
         Method and stopping rules.
+    refine : RefineSettings
+        Adaptive refinement after the solve (threshold 0 turns it off).
     scale : float
         Multiplies scene coordinates to get metres (0.001 for a model in millimetres).
     exposure : float or None
@@ -103,6 +106,7 @@ class RenderSettings:
 
     mesh: MeshSettings = field(default_factory=MeshSettings)
     solve: SolveSettings = field(default_factory=SolveSettings)
+    refine: RefineSettings = field(default_factory=RefineSettings)
     scale: float = 1.0
     exposure: float | None = None
     cache_mb: float = defaults.cache_mb
@@ -159,6 +163,7 @@ __all__ = [
     "ImageSettings",
     "LightmapSettings",
     "MeshSettings",
+    "RefineSettings",
     "RenderSettings",
     "SettingsError",
     "SolveSettings",

@@ -46,7 +46,7 @@ def test_step_by_step_equals_solve_scene() -> None:
         stepwise = solve(prepared.mesh, prepared.engine, settings.solve)
     _, at_once = api.solve_scene(scene, settings)
     np.testing.assert_array_equal(stepwise.radiosity, at_once.radiosity)
-    np.testing.assert_allclose(at_once.radiosity, 2.0, rtol=2e-4)
+    np.testing.assert_allclose(at_once.radiosity, 2.0, rtol=3e-4)  # 3 x tolerance, test_solver
 
 
 def test_render_reports_progress_and_applies_the_file_defaults(tmp_path: Path) -> None:

@@ -63,7 +63,7 @@ def test_max_shots_stops_early_and_says_so(
     assert report["solve"]["residual"] > 1e-3
     assert _ledger_balances(report["energy_watts"])
     _, _, radiosity = read_radiosity_ply(out / "furnace.ply")
-    assert radiosity.max() < 2.0  # three shots are not the converged 2.0
+    assert radiosity.mean() < 0.99 * 2.0  # three shots are not the converged 2.0
 
 
 def test_python_dash_m_exit_status(tmp_path: Path) -> None:

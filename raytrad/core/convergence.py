@@ -3,6 +3,11 @@ reference is known, the true error. The derivation of the bound is in ``docs/err
 
 Notation (see :mod:`raytrad.core.solver`): patch unshot radiosity dB_p, patch area A_p, receiver
 area a_j, reflectance rho_j, form factors F_jp, capture fraction g_p = sum_j a_j F_jp / A_p.
+
+Every relative error is taken over the receivers that do not emit
+(:func:`counted_receivers`): a lamp's radiosity is mostly its own emission, known exactly,
+and one bright lamp would otherwise dominate the norm and make every error look small.
+Where every surface emits (a furnace), all receivers count.
 """
 
 from __future__ import annotations
@@ -41,6 +46,17 @@ class Reference:
     description: str
 
 
+def counted_receivers(mesh: RadiosityMesh) -> np.ndarray:
+    """(R,) bool: the receivers relative errors are measured over.
+
+    Those that do not emit, or every receiver when all of them emit.
+    """
+    counted = ~(mesh.receiver_emitted_exitance > 0).any(axis=1)
+    if not (counted & (mesh.receiver_area > 0)).any():
+        counted = np.ones(mesh.receiver_count, dtype=bool)
+    return np.asarray(counted, dtype=bool)
+
+
 def true_error(
     radiosity: np.ndarray, reference: np.ndarray, area: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -72,6 +88,7 @@ def error_bound(
     max_reflectance: np.ndarray,
     max_row_sum: float,
     max_capture: float,
+    unshot_peak: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Guaranteed bounds on the relative RMS and maximum error of the current radiosity.
 
@@ -90,9 +107,14 @@ def error_bound(
     unshot : (P, 3) float64 [W m-2]
     patch_area : (P,) float64 [m2]
     receiver_area : (R,) float64 [m2]
-    radiosity : (R, 3) float64 [W m-2], the current solution
+        Of the receivers the error is taken over (any subset: the bounds on the maximum
+        and on the area-weighted sum hold over every subset, :func:`counted_receivers`).
+    radiosity : (R, 3) float64 [W m-2], the current solution at those receivers
     max_reflectance : (3,) float64 [1]
     max_row_sum, max_capture : float [1]
+    unshot_peak : (P, 3) float64 or None [W m-2]
+        The largest unshot radiosity of each patch's receivers (a near receiver sees them
+        one by one, :attr:`~raytrad.core.solver.SolverState.unshot_peak`); None: ``|unshot|``.
 
     Returns
     -------
@@ -103,7 +125,8 @@ def error_bound(
     q_max = max_reflectance * max_row_sum
     q_sum = max_reflectance * max_capture
     with np.errstate(divide="ignore", invalid="ignore"):
-        e_max = np.where(q_max < 1.0, q_max * np.abs(unshot).max(axis=0) / (1.0 - q_max), np.inf)
+        peak = np.abs(unshot) if unshot_peak is None else np.maximum(np.abs(unshot), unshot_peak)
+        e_max = np.where(q_max < 1.0, q_max * peak.max(axis=0) / (1.0 - q_max), np.inf)
         e_mean = np.where(
             q_sum < 1.0,
             q_sum * (patch_area @ np.abs(unshot)) / (1.0 - q_sum) / total_area,
@@ -126,11 +149,14 @@ def error_estimate(
     receiver_area: np.ndarray,
     receiver_reflectance: np.ndarray,
     radiosity: np.ndarray,
+    spread: np.ndarray | float = 0.0,
 ) -> np.ndarray:
     """Predicted relative RMS change still to come, from the ambient term (Feda formula 3).
 
     The unshot power, amplified by the scene's measured interreflection
     ``1 / (1 - rho g)``, spread over all surfaces and reflected once: ``rho_j * Ambient``.
+    ``spread`` ((P, 3) or 0) is the unshot radiosity's spread within each patch
+    (:attr:`~raytrad.core.solver.SolverState.spread`), counted in the unsigned sum.
 
     Returns
     -------
@@ -144,7 +170,7 @@ def error_estimate(
     # remaining change lies between the two; their geometric mean tracks it (docs/error.md).
     caught = patch_area * capture  # only the caught part of a shot lands on surfaces
     signed = np.abs(caught @ unshot) / lost
-    unsigned = (caught @ np.abs(unshot)) / lost
+    unsigned = (caught @ (np.abs(unshot) + spread)) / lost
     ambient = np.sqrt(signed * unsigned)
     change = np.sqrt(receiver_area @ (receiver_reflectance * ambient) ** 2)
     norm = np.sqrt(receiver_area @ radiosity**2)
@@ -215,6 +241,7 @@ class ConvergenceMonitor:
         self.log = ErrorLog()
         self._next = 0
         self._max_reflectance = mesh.receiver_reflectance.max(axis=0)
+        self._counted = counted_receivers(mesh)
         self._emitted = float((mesh.receiver_area @ mesh.receiver_emitted_exitance).sum())
         self.latest_estimate = math.inf
         self.latest_bound = math.inf
@@ -227,28 +254,32 @@ class ConvergenceMonitor:
     def record(self, state: SolverState) -> None:
         """Add one row for the current state."""
         m = self.mesh
-        unshot_power = float((m.patch_area @ np.abs(state.unshot)).sum())
+        unshot_power = float((m.patch_area @ state.unshot_magnitude).sum())
         residual = unshot_power / self._emitted if self._emitted > 0 else 0.0
         radiosity = m.receiver_emitted_exitance + m.receiver_reflectance * state.irradiance
+        counted = self._counted
+        area = m.receiver_area[counted]
         captured = state.captured[np.isfinite(state.captured)]
         max_capture = max(1.0, float(captured.max()) if len(captured) else 1.0)
         bound_rms, bound_max = error_bound(
-            state.unshot,
+            state.unshot_magnitude,
             m.patch_area,
-            m.receiver_area,
-            radiosity,
+            area,
+            radiosity[counted],
             self._max_reflectance,
             max(1.0, self.engine.max_row_sum),
             max_capture,
+            state.unshot_peak,
         )
         estimate = error_estimate(
             state.unshot,
             m.patch_area,
             m.patch_reflectance,
             state.captured,
-            m.receiver_area,
-            m.receiver_reflectance,
-            radiosity,
+            area,
+            m.receiver_reflectance[counted],
+            radiosity[counted],
+            state.spread if state.spread.shape == state.shot.shape else 0.0,
         )
         log = self.log
         log.seconds.append(state.seconds)
@@ -259,7 +290,7 @@ class ConvergenceMonitor:
         log.bound_rms.append(bound_rms.tolist())
         log.bound_max.append(bound_max.tolist())
         if self.reference is not None:
-            rms, maximum = true_error(radiosity, self.reference.radiosity, m.receiver_area)
+            rms, maximum = true_error(radiosity[counted], self.reference.radiosity[counted], area)
             log.true_rms.append(rms.tolist())
             log.true_max.append(maximum.tolist())
         self.latest_estimate = float(estimate.max())

@@ -1,9 +1,9 @@
 """Form-factor kernels: closed-form point-to-area factors, numpy-vectorised over pairs.
 
 * :func:`disk_form_factor`: the Wallace et al. (1989) disk approximation of a
-  differential-to-area factor (REFERENCE.md section 2);
+  differential-to-area factor;
 * :func:`polygon_form_factor`: the exact unoccluded point-to-polygon factor (Lambert's
-  formula, REFERENCE.md section 3), clipped to the receiver's horizon;
+  formula; Baum, Rushmeier and Winget 1989), clipped to the receiver's horizon;
 * :func:`contour_form_factor`: Lambert's formula over the boundary edges of a planar
   surface (interior edges cancel).
 
@@ -117,7 +117,7 @@ def polygon_form_factor(
     """Exact unoccluded point-to-polygon form factor (Lambert's formula).
 
     ``F = |sum_k gamma_k n . (u_k x u_k+1) / |u_k x u_k+1|| / (2 pi)`` with u_k the unit
-    vectors to the corners (REFERENCE.md section 3). The polygons are first clipped to each
+    vectors to the corners (Baum et al. 1989). The polygons are first clipped to each
     receiver's horizon, so the formula's precondition holds.
 
     Parameters
@@ -142,6 +142,58 @@ def polygon_form_factor(
     if part.any():
         clipped, count = clip_to_horizon(polygons[part], points[part], normals[part])
         out[part] = np.where(count >= 3, _lambert(clipped, points[part], normals[part]), 0.0)
+    return out
+
+
+def _sub_triangles(levels: int) -> tuple[np.ndarray, np.ndarray]:
+    """Barycentric corners (4^levels, 3, 3) and centroids (4^levels, 3) of the midpoint
+    subdivision of a triangle, ``levels`` times."""
+    tris = np.eye(3)[None, :, :]
+    for _ in range(levels):
+        a, b, c = tris[:, 0], tris[:, 1], tris[:, 2]
+        ab, bc, ca = (a + b) / 2, (b + c) / 2, (c + a) / 2
+        tris = np.concatenate(
+            [np.stack(t, axis=1) for t in ((a, ab, ca), (ab, b, bc), (ca, bc, c), (ab, bc, ca))]
+        )
+    return tris, tris.mean(axis=1)
+
+
+def linear_corner_shares(
+    triangles: np.ndarray, points: np.ndarray, normals: np.ndarray, levels: int = 2
+) -> np.ndarray:
+    """(N, 3) share of each corner in what a receiver sees of a linearly varying triangle.
+
+    A receiver close to a triangle sees mostly its nearest part: the radiosity it gathers
+    from a triangle with corner values ``B_k`` is ``sum_k s_k B_k``, with ``s_k`` the
+    factor-weighted mean barycentric coordinate of corner k over the triangle. Computed by
+    splitting each triangle ``levels`` times at its edge midpoints (``4**levels`` exact
+    factors, :func:`polygon_form_factor`) and weighting each part's centroid coordinates
+    by its factor. Triangles the receiver does not see get equal shares.
+
+    Parameters
+    ----------
+    triangles : (N, 3, 3) float64
+        Corners [m].
+    points, normals : (N, 3) float64
+        Receiver positions [m] and unit normals.
+    levels : int
+        Midpoint subdivisions.
+
+    Returns
+    -------
+    (N, 3) float64, rows summing to 1.
+    """
+    corners, centroids = _sub_triangles(levels)
+    count = len(corners)
+    parts = np.einsum("skc,ncj->nskj", corners, triangles).reshape(-1, 3, 3)
+    factor = polygon_form_factor(
+        parts, np.repeat(points, count, axis=0), np.repeat(normals, count, axis=0)
+    ).reshape(-1, count)
+    total = factor.sum(axis=1)
+    shares = factor @ centroids
+    seen = total > 0
+    out = np.full((len(triangles), 3), 1.0 / 3.0)
+    out[seen] = shares[seen] / total[seen, None]
     return out
 
 

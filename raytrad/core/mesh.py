@@ -73,6 +73,8 @@ class RadiosityMesh:
     triangles : (T, 3) int64, vertex indices of the refined mesh
     receiver_visible : (R,) bool or None, False for receivers shut in by other surfaces
         (see :func:`hide_receivers`); None means all visible
+    triangle_surface : (T,) int64 or None, the smooth surface of one material each refined
+        triangle belongs to (receivers are split between surfaces); None when unknown
     """
 
     receiver_position: np.ndarray
@@ -101,6 +103,7 @@ class RadiosityMesh:
     positions: np.ndarray
     triangles: np.ndarray
     receiver_visible: np.ndarray | None = None
+    triangle_surface: np.ndarray | None = None
 
     @property
     def receiver_count(self) -> int:
@@ -207,7 +210,7 @@ def build_mesh(
         area[keep],
         normal[keep],
     )
-    receivers = _receivers(positions, fine, fine_surface, area, normal)
+    receivers = surface_receivers(positions, fine, fine_surface, area, normal)
     triangle_receivers, r_pos, r_normal, r_area, r_inward = receivers
     tri_material = material[parent]
     r_material = np.empty(len(r_pos), dtype=np.int64)
@@ -222,7 +225,7 @@ def build_mesh(
     subarea = _subareas(centroids, patch, emissive, settings)
 
     mesh_source = _source_index(scene, parent)
-    return _assemble(
+    mesh = _assemble(
         scene,
         positions,
         fine,
@@ -240,6 +243,7 @@ def build_mesh(
         r_material,
         settings.seed,
     )
+    return replace(mesh, triangle_surface=fine_surface)
 
 
 def _edge_limits(
@@ -306,7 +310,7 @@ def _source_index(scene: Scene, parent: np.ndarray) -> np.ndarray:
     return source[parent]
 
 
-def _receivers(
+def surface_receivers(
     positions: np.ndarray,
     triangles: np.ndarray,
     surface: np.ndarray,
@@ -332,8 +336,14 @@ def _receivers(
     # the fin's plane, and a receiver evaluated there would see half a hemisphere.
     largest = np.zeros(count)
     np.maximum.at(largest, inverse, third)
-    relative = np.round(third / np.maximum(largest[inverse], 1e-300) / tol.tie)  # ties: see
-    order = np.lexsort((-relative, inverse))  # longest_edge
+    # ties (triangles equal up to the rounding of their coordinates, which grows with
+    # the distance from the origin) go to the first triangle; rounding the ratio instead
+    # would flip at half-steps
+    edge = np.sqrt(6.0 * np.maximum(largest[inverse], 1e-300))  # ~ the triangle's size [m]
+    far = float(np.abs(positions).max(initial=0.0))
+    slack = tol.tie + 16.0 * np.finfo(np.float64).eps * far / edge
+    near_largest = third >= largest[inverse] * (1.0 - slack)
+    order = np.lexsort((~near_largest, inverse))
     first = order[np.searchsorted(inverse[order], np.arange(count))]
     r_inward = centroid[first]
     r_normal /= np.linalg.norm(r_normal, axis=1)[:, None]

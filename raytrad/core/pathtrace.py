@@ -50,7 +50,7 @@ def path_traced_radiosity(
         One standard error of the estimate [W m-2].
     """
     rng = np.random.default_rng(seed)
-    tracer = _Tracer(scene, Occluder(scene.positions, scene.triangles), rng)
+    tracer = Tracer(scene, Occluder(scene.positions, scene.triangles), rng)
     mean = np.zeros((len(points), 3))
     error = np.zeros((len(points), 3))
     try:
@@ -63,8 +63,13 @@ def path_traced_radiosity(
     return mean, error
 
 
-class _Tracer:
-    """Vectorised path tracing over many paths from one point (see path_traced_radiosity)."""
+class Tracer:
+    """Vectorised path tracing over many paths from one point (see
+    :func:`path_traced_radiosity`), and one-sample direct lighting (:meth:`direct`).
+
+    ``occluder`` may be built on any triangulation of the scene's surfaces (a refined
+    mesh): emitters are the scene's, in the occluder's local frame.
+    """
 
     def __init__(self, scene: Scene, occluder: Any, rng: np.random.Generator) -> None:
         self.occluder = occluder
@@ -92,7 +97,7 @@ class _Tracer:
         alive = np.arange(paths)
         for bounce in range(max_bounces):
             total[alive] += throughput * self.direct(origin, normal)
-            direction = _cosine_directions(normal, self.rng)
+            direction = cosine_directions(normal, self.rng)
             hit, distance = self.occluder.intersect_local(origin, direction)
             ok = hit >= 0
             cos_hit = np.zeros(len(hit))
@@ -112,15 +117,29 @@ class _Tracer:
                 alive, origin, normal = alive[keep], origin[keep], normal[keep]
         return total
 
-    def direct(self, origin: np.ndarray, normal: np.ndarray) -> np.ndarray:
-        """(N, 3) one-sample estimate of the irradiance from emitters at each origin."""
+    def direct(
+        self, origin: np.ndarray, normal: np.ndarray, uniforms: np.ndarray | None = None
+    ) -> np.ndarray:
+        """(N, 3) one-sample estimate of the irradiance from emitters at each origin.
+
+        ``origin`` is in the occluder's local frame. ``uniforms`` ((N, 2) in [0, 1), drawn
+        when None) pick the point on the emitters: the first selects by cumulative area
+        (its remainder and the second place the point in the triangle by the square-root
+        map), so stratified uniforms give stratified emitter samples.
+        """
         if self.emitter_area == 0.0:
             return np.zeros((len(origin), 3))
-        pick = np.searchsorted(self.emitter_cdf, self.rng.random(len(origin)) * self.emitter_area)
-        tri = self.emitters[np.minimum(pick, len(self.emitters) - 1)]
-        u, v = self.rng.random(len(origin)), self.rng.random(len(origin))
-        flip = u + v > 1.0
-        u, v = np.where(flip, 1.0 - u, u), np.where(flip, 1.0 - v, v)
+        if uniforms is None:
+            uniforms = self.rng.random((len(origin), 2))
+        s = uniforms[:, 0] * self.emitter_area
+        pick = np.minimum(
+            np.searchsorted(self.emitter_cdf, s, side="right"), len(self.emitters) - 1
+        )
+        tri = self.emitters[pick]
+        before = np.concatenate([[0.0], self.emitter_cdf])[pick]
+        size = np.diff(np.concatenate([[0.0], self.emitter_cdf]))[pick]
+        root = np.sqrt(np.clip((s - before) / np.maximum(size, 1e-300), 0.0, 1.0))
+        u, v = root * (1.0 - uniforms[:, 1]), root * uniforms[:, 1]
         c = self.corners[tri]
         target = c[:, 0] + u[:, None] * (c[:, 1] - c[:, 0]) + v[:, None] * (c[:, 2] - c[:, 0])
         delta = target - origin
@@ -141,9 +160,15 @@ class _Tracer:
         return self.emission[tri] / np.pi * (geometry * self.emitter_area)[:, None]
 
 
-def _cosine_directions(normal: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+def cosine_directions(normal: np.ndarray, rng: np.random.Generator) -> np.ndarray:
     """(N, 3) unit directions, cosine-distributed about each (N, 3) unit normal."""
-    u1, u2 = rng.random(len(normal)), rng.random(len(normal))
+    return cosine_directions_from(normal, rng.random(len(normal)), rng.random(len(normal)))
+
+
+def cosine_directions_from(normal: np.ndarray, u1: np.ndarray, u2: np.ndarray) -> np.ndarray:
+    """(N, 3) unit directions about each (N, 3) unit normal from (N,) uniform numbers in
+    [0, 1): cosine-distributed when ``u1, u2`` are uniform (stratify them to stratify the
+    directions). ``u1`` sets the polar angle (``sin^2 theta = u1``), ``u2`` the azimuth."""
     r, phi = np.sqrt(u1), 2.0 * np.pi * u2
     local = np.stack([r * np.cos(phi), r * np.sin(phi), np.sqrt(1.0 - u1)], axis=1)
     helper = np.where(np.abs(normal[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])

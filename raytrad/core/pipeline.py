@@ -1,5 +1,6 @@
 """From a scene and mesh settings to a solvable problem: repair, acceleration, mesh, form
-factors. Everything before the first shot, and nothing that reads or writes a file.
+factors (everything before the first shot), and after the solve, adaptive refinement and
+the total error. Nothing here reads or writes a file.
 
 >>> from raytrad.core.pipeline import prepare
 >>> from raytrad.core.solver import solve
@@ -10,6 +11,7 @@ factors. Everything before the first shot, and nothing that reads or writes a fi
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import time
 from collections.abc import Iterator
@@ -20,10 +22,18 @@ from typing import Any
 import numpy as np
 
 from raytrad.constants import defaults, scene_extent, tol
+from raytrad.core.accuracy import (
+    SAMPLES,
+    ErrorParts,
+    conservation_error,
+    discretisation_error,
+)
+from raytrad.core.adaptive import Refinement, RefineSettings, refine_adaptively
+from raytrad.core.convergence import counted_receivers
 from raytrad.core.formfactor import FormFactorEngine, receiver_points
 from raytrad.core.mesh import MeshSettings, RadiosityMesh, build_mesh, hide_receivers
 from raytrad.core.repair import repair_scene
-from raytrad.core.solver import check_solvable
+from raytrad.core.solver import SolveResult, check_solvable, filled_capture
 from raytrad.core.visibility import Occluder, nothing_can_occlude
 from raytrad.scene import Scene, triangle_areas_normals
 
@@ -143,6 +153,76 @@ def prepare(
         balance["capture_excess"],
     )
     return Prepared(scene, mesh, engine, occluder, timings, closed, balance)
+
+
+def refine_solution(
+    prepared: Prepared, result: SolveResult, settings: RefineSettings
+) -> tuple[Prepared, SolveResult, Refinement]:
+    """Adaptive refinement of a solve (:mod:`raytrad.core.adaptive`).
+
+    Returns
+    -------
+    baked : Prepared
+        ``prepared`` with the refined mesh (``prepared`` itself when nothing was added;
+        it shares the engine and occluder, so close only one of the two).
+    result : SolveResult
+        ``result`` with the refined mesh's radiosity.
+    refinement : Refinement
+    """
+    refinement = refine_adaptively(
+        prepared.scene,
+        prepared.mesh,
+        prepared.engine,
+        prepared.occluder,
+        result.radiosity,
+        settings,
+    )
+    if not refinement.added:
+        return prepared, result, refinement
+    baked = dataclasses.replace(prepared, mesh=refinement.mesh)
+    return baked, dataclasses.replace(result, radiosity=refinement.radiosity), refinement
+
+
+def error_samples(receivers: int) -> int:
+    """Points of the residual check for a bake of ``receivers``: a quarter of them,
+    between 256 and :data:`~raytrad.core.accuracy.SAMPLES`, so that the check stays a
+    small part of a small bake's cost. Fewer points make the estimate noisier and, since
+    one standard error is added, larger on average, not smaller."""
+    return int(min(SAMPLES, max(256, receivers // 4)))
+
+
+def total_error(
+    solved: Prepared, baked: Prepared, result: SolveResult, estimate: np.ndarray
+) -> ErrorParts:
+    """The bake's total error and its parts (:mod:`raytrad.core.accuracy`).
+
+    Parameters
+    ----------
+    solved : Prepared
+        Holds the mesh that was solved.
+    baked : Prepared
+        Holds the (refined) mesh of ``result.radiosity``.
+    result : SolveResult
+    estimate : (3,) float64
+        The solve's estimate of its remaining algebraic error at its end [1]
+        (:func:`~raytrad.core.convergence.error_estimate`).
+    """
+    mesh = solved.mesh
+    capture = filled_capture(result.state.captured, mesh.patch_area)
+    residual = discretisation_error(
+        baked.scene,
+        baked.mesh,
+        result.radiosity,
+        counted_receivers(baked.mesh),
+        float(mesh.patch_area @ capture / max(float(mesh.patch_area.sum()), 1e-300)),
+        samples=error_samples(mesh.receiver_count),
+    )
+    return ErrorParts(
+        algebraic=np.asarray(estimate, dtype=np.float64),
+        discretisation=residual.error,
+        conservation=conservation_error(solved.engine, mesh),
+        samples=residual.samples,
+    )
 
 
 def _enclosure_test(scene: Scene, occluder: Occluder | None) -> Any:

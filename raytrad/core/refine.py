@@ -54,6 +54,7 @@ def refine(
     triangles: np.ndarray,
     max_edge: float | np.ndarray,
     max_rounds: int = 40,
+    quiet: bool = False,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Conforming refinement until no edge is longer than ``max_edge``.
 
@@ -69,6 +70,10 @@ def refine(
     max_edge : float or (T,) float [m]
         Longest edge allowed, overall or per input triangle (an edge shared by two
         triangles takes the smaller limit, so the mesh stays conforming).
+    max_rounds : int
+        Most rounds of splitting (each round splits every marked edge once).
+    quiet : bool
+        Do not warn when the rounds run out (a deliberate single round, say).
 
     Returns
     -------
@@ -102,7 +107,8 @@ def refine(
         triangles, keep = _split_triangles(triangles, tri_edges, longest, midpoint_index)
         parent = parent[keep]
     else:
-        log.warning("refinement stopped after %d rounds", max_rounds)
+        if not quiet:
+            log.warning("refinement stopped after %d rounds", max_rounds)
     return positions, triangles, parent
 
 

@@ -4,7 +4,7 @@ The discrete system
 -------------------
 Receivers j carry radiosity B_j [W m-2]; patches p shoot. The radiosity of patch p is the
 area-weighted mean of its receivers, ``B̄ = W B``. With vertex-to-patch form factors
-F_jp (:mod:`raytrad.formfactor`)::
+F_jp (:mod:`raytrad.core.formfactor`)::
 
     B_j = E_j + rho_j * sum_p F_jp * B̄_p                                          (1)
 
@@ -108,6 +108,19 @@ class SolverState:
         Damping of the ambient overshoot (1 = formula 4 as published).
     damping_events : int
         Times growth of the unshot power (the sign of divergence) halved the overshoot.
+    entry_shot : (N, 3) float64
+        Radiosity shot so far by each (patch, receiver) entry of ``W`` (a receiver on a
+        patch border belongs to each of its patches) [W m-2]; ``shot = W entry_shot``.
+        Near receivers gather what a patch shoots as it varies across its receivers
+        (:mod:`raytrad.core.gather`), so the shots are kept per entry.
+    spread : (P, 3) float64
+        ``sum_k W_pk |dB_pk - dB_p|``: how far the unshot radiosity of the patch's
+        entries spreads about their mean [W m-2]. Shooting the mean leaves it to the near
+        receivers; it counts as unshot (:attr:`unshot_magnitude`). Derived from the other
+        arrays (not checkpointed).
+    peak : (P, 3) float64
+        ``max_k |dB_pk|``, the largest unshot radiosity of the patch's entries: what a
+        near receiver may see of it [W m-2]. Derived like ``spread``.
     """
 
     irradiance: np.ndarray
@@ -122,14 +135,38 @@ class SolverState:
     ambient_gain: float = 1.0
     min_unshot: float = math.inf
     damping_events: int = 0
+    entry_shot: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    spread: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    peak: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
 
     @property
     def unshot(self) -> np.ndarray:
         """(P, 3) float64 unshot radiosity of each patch [W m-2]."""
         return np.asarray(self.patch_radiosity - self.shot)
 
+    @property
+    def unshot_peak(self) -> np.ndarray:
+        """(P, 3) float64 ``max_k |dB_pk|`` (at least ``|unshot|``) [W m-2]."""
+        peak = self.peak if self.peak.shape == self.shot.shape else 0.0
+        return np.asarray(np.maximum(np.abs(self.unshot), peak))
+
+    @property
+    def unshot_magnitude(self) -> np.ndarray:
+        """(P, 3) float64 ``|unshot| + spread``: at least ``sum_k W_pk |dB_pk|``, what is
+        still to shoot whoever sees it [W m-2]."""
+        spread = self.spread if self.spread.shape == self.shot.shape else 0.0
+        return np.asarray(np.abs(self.unshot) + spread)
+
     #: The arrays and the scalars that make up a state (what a checkpoint stores).
-    ARRAYS = ("irradiance", "patch_radiosity", "shot", "captured", "absorbed", "escaped")
+    ARRAYS = (
+        "irradiance",
+        "patch_radiosity",
+        "shot",
+        "captured",
+        "absorbed",
+        "escaped",
+        "entry_shot",
+    )
     SCALARS = ("shots", "rays", "seconds", "ambient_gain", "min_unshot", "damping_events")
 
     def to_record(self) -> tuple[dict[str, np.ndarray], dict[str, float]]:
@@ -274,6 +311,10 @@ class _Problem:
     receiver_ptr: np.ndarray  # (R + 1,) CSR rows of W^T
     entry_patch: np.ndarray  # (nnz,)
     entry_weight: np.ndarray  # (nnz,) W[patch, receiver]
+    entry_receiver: np.ndarray  # (nnz,)
+    patch_entries: np.ndarray  # (nnz,) entries grouped by patch
+    patch_ptr: np.ndarray  # (P + 1,) CSR pointers into patch_entries
+    scratch: np.ndarray  # (R, 3) zeros, a work array of _shoot
 
     @classmethod
     def from_mesh(cls, mesh: RadiosityMesh) -> _Problem:
@@ -288,6 +329,8 @@ class _Problem:
         w = np.bincount(inverse.reshape(-1), weights=weight)
         r = uniq // mesh.patch_count
         ptr = np.searchsorted(r, np.arange(mesh.receiver_count + 1))
+        entry_patch = uniq % mesh.patch_count
+        by_patch = np.argsort(entry_patch, kind="stable")
         return cls(
             patch_area=mesh.patch_area,
             patch_reflectance=mesh.patch_reflectance,
@@ -295,8 +338,31 @@ class _Problem:
             receiver_reflectance=mesh.receiver_reflectance,
             receiver_emission=mesh.receiver_emitted_exitance,
             receiver_ptr=ptr,
-            entry_patch=uniq % mesh.patch_count,
+            entry_patch=entry_patch,
             entry_weight=w,
+            entry_receiver=r,
+            patch_entries=by_patch,
+            patch_ptr=np.searchsorted(entry_patch[by_patch], np.arange(mesh.patch_count + 1)),
+            scratch=np.zeros((mesh.receiver_count, 3)),
+        )
+
+    def spread(self, state: SolverState) -> np.ndarray:
+        """(P, 3) ``sum_k W_pk |dB_pk - dB_p|`` of ``state`` (see :class:`SolverState`);
+        also sets ``state.peak``."""
+        k = self.entry_receiver
+        own = (
+            self.receiver_emission[k]
+            + self.receiver_reflectance[k] * state.irradiance[k]
+            - state.entry_shot
+        )
+        deviation = self.entry_weight[:, None] * np.abs(own - state.unshot[self.entry_patch])
+        count = len(self.patch_area)
+        peak = np.zeros((count, 3))
+        np.maximum.at(peak, self.entry_patch, np.abs(own))
+        state.peak = peak
+        return np.stack(
+            [np.bincount(self.entry_patch, deviation[:, c], minlength=count) for c in range(3)],
+            axis=1,
         )
 
     def average(self, receivers: np.ndarray, values: np.ndarray) -> np.ndarray:
@@ -333,6 +399,7 @@ def new_state(mesh: RadiosityMesh, problem: _Problem | None = None) -> SolverSta
         patch_radiosity=problem.average(everyone, mesh.receiver_emitted_exitance),
         shot=np.zeros((mesh.patch_count, 3)),
         captured=np.full(mesh.patch_count, np.nan),
+        entry_shot=np.zeros((len(problem.entry_patch), 3)),
     )
 
 
@@ -386,6 +453,8 @@ def solve(
     check_solvable(mesh)
     problem = _Problem.from_mesh(mesh)
     state = state or new_state(mesh, problem)
+    if state.entry_shot.shape != (len(problem.entry_patch), 3):
+        raise SolverError("the state to resume was made for another mesh")
     amount_of = SHOOTING_METHODS[settings.method].amount
     area = problem.patch_area
     emitted = area @ problem.average(np.arange(mesh.receiver_count), problem.receiver_emission)
@@ -394,20 +463,22 @@ def solve(
     rays_before = state.rays  # from a checkpoint; the engine counts this run's rays
     reason = "no-emission" if emitted_total <= 0 else ""
     residual = 0.0
+    state.spread = problem.spread(state)
     while not reason:
-        residual = float((area @ np.abs(state.unshot)).sum()) / emitted_total
+        residual = float((area @ state.unshot_magnitude).sum()) / emitted_total
         reason = _stop_reason(state, settings, residual, time.perf_counter() - start)
         if not reason and stop is not None and stop():
             reason = "interrupted"
         if reason:
             break
         amount = amount_of(problem, state, settings)
-        magnitude = area * np.abs(amount).sum(axis=1)
+        magnitude = area * (np.abs(amount) + state.spread).sum(axis=1)
         patch = int(np.argmax(magnitude))
         if magnitude[patch] <= 0:
             reason = "converged"
             break
         _shoot(problem, state, engine.column(patch), patch, amount[patch])
+        state.spread = problem.spread(state)
         state.rays = rays_before + engine.rays_cast
         state.seconds = time.perf_counter() - start
         _guard_growth(state, area, settings)
@@ -416,7 +487,9 @@ def solve(
             progress(state, residual)
     state.seconds = time.perf_counter() - start
     state.rays = rays_before + engine.rays_cast
-    residual = float((area @ np.abs(state.unshot)).sum()) / emitted_total if emitted_total else 0.0
+    residual = (
+        float((area @ state.unshot_magnitude).sum()) / emitted_total if emitted_total else 0.0
+    )
     radiosity = problem.receiver_emission + problem.receiver_reflectance * state.irradiance
     if not np.isfinite(radiosity).all():
         raise SolverError("the solve produced non-finite radiosity")
@@ -446,13 +519,39 @@ def _stop_reason(
 def _shoot(
     problem: _Problem, state: SolverState, column: Column, patch: int, amount: np.ndarray
 ) -> None:
-    """Shoot ``amount`` ((3,) [W m-2]) from ``patch`` through its form-factor column."""
+    """Shoot ``amount`` ((3,) [W m-2]) from ``patch`` through its form-factor column.
+
+    Each of the patch's receivers shoots its own unshot radiosity plus the patch's
+    overshoot (``amount`` minus the patch's unshot radiosity), so that the patch mean is
+    ``amount``. A far receiver gets ``F_jp * amount``; a near one
+    (:mod:`raytrad.core.gather`) gets ``F_jp`` times what it sees of the patch, the
+    gather-weighted mean of the receivers' shots, and the far ones give back what that
+    gained or lost against the mean (:func:`_conserve`).
+    """
+    entries = problem.patch_entries[problem.patch_ptr[patch] : problem.patch_ptr[patch + 1]]
+    sources = problem.entry_receiver[entries]
+    radiosity = (
+        problem.receiver_emission[sources]
+        + problem.receiver_reflectance[sources] * state.irradiance[sources]
+    )
+    own = radiosity - state.entry_shot[entries]
+    weight = problem.entry_weight[entries]
+    overshoot = amount - weight @ own
+    shots = own + overshoot[None, :]  # (n, 3), their W-mean is ``amount``
+    state.entry_shot[entries] += shots
     j, f = column.receivers, column.factors
-    area_p = problem.patch_area[patch]
     irradiance = f[:, None] * amount[None, :]  # (K, 3)
+    gather = column.gather
+    if len(gather.receivers):
+        problem.scratch[sources] = shots
+        near = np.searchsorted(j, gather.receivers)
+        irradiance[near] = f[near, None] * gather.gathered(problem.scratch)
+        problem.scratch[sources] = 0.0
+        _conserve(irradiance, f, amount, problem.receiver_area[j], near)
     state.irradiance[j] += irradiance
     reflected = problem.receiver_reflectance[j] * irradiance
     state.patch_radiosity += problem.average(j, reflected)
+    area_p = problem.patch_area[patch]
     state.shot[patch] += amount
     a = problem.receiver_area[j]
     caught = a @ irradiance  # (3,) power landing on receivers [W]
@@ -460,6 +559,45 @@ def _shoot(
     state.escaped += area_p * amount - caught
     state.captured[patch] = float(a @ f) / area_p
     state.shots += 1
+
+
+def _conserve(
+    irradiance: np.ndarray,
+    factors: np.ndarray,
+    amount: np.ndarray,
+    area: np.ndarray,
+    near: np.ndarray,
+) -> None:
+    """Give the far receivers of a shot the power its near receivers' gather added or took.
+
+    The discrete gather weights are not exactly reciprocal, so the near receivers of a
+    patch catch a little more or less power than the patch mean would deliver; unchecked,
+    closed scenes of high reflectance amplify that by ``1 / (1 - rho)``. The far
+    receivers, which see the patch as its mean, absorb the difference in proportion to
+    their factors (the near ones, when a patch has no far receivers), so every shot
+    delivers exactly ``sum_j a_j F_jp * amount`` in power.
+
+    Parameters
+    ----------
+    irradiance : (K, 3) float
+        The shot's irradiance at the column's receivers, updated in place [W m-2].
+    factors : (K,) float
+        The column's form factors [1].
+    amount : (3,) float
+        Radiosity shot [W m-2].
+    area : (K,) float
+        Receiver areas [m2].
+    near : (G,) int
+        Rows of the near receivers.
+    """
+    excess = area[near] @ (irradiance[near] - factors[near, None] * amount[None, :])  # [W]
+    target = np.ones(len(factors), bool)
+    target[near] = False
+    caught = float(area[target] @ factors[target])
+    if not caught > 0.0:
+        target, caught = ~target, float(area[near] @ factors[near])
+    if caught > 0.0:
+        irradiance[target] -= factors[target, None] * (excess / caught)[None, :]
 
 
 #: Unshot power beyond this multiple of the emitted power means divergence: overshooting

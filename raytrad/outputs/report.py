@@ -6,10 +6,15 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import math
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from raytrad import __version__
+from raytrad.core.accuracy import ErrorParts, total_error_column
+from raytrad.core.adaptive import Refinement
 from raytrad.core.convergence import ErrorLog, Reference
 from raytrad.core.pipeline import Prepared
 from raytrad.core.solver import SolveResult
@@ -39,6 +44,7 @@ def build_report(
         "settings": {
             "mesh": dataclasses.asdict(settings.mesh),
             "solve": dataclasses.asdict(settings.solve),
+            "refine": dataclasses.asdict(settings.refine),
             "scale": settings.scale,
             "exposure": settings.exposure,
             "cache_mb": settings.cache_mb,
@@ -95,6 +101,43 @@ def add_error_log(
         name: (columns[name][-1] if columns[name] else None) for name in ERROR_COLUMNS
     }
     return report
+
+
+def add_total_error(
+    report: dict[str, Any],
+    error_log: ErrorLog,
+    error: ErrorParts,
+    refinement: Refinement,
+    solved_receivers: int,
+) -> dict[str, Any]:
+    """``report`` with the total error (``error.total_rms``, its parts and which one
+    dominates), its column in the error log, and what adaptive refinement did."""
+    report["convergence"]["total_rms"] = _strict(total_error_column(error_log.bound_rms, error))
+    report["error"]["total_rms"] = _strict(error.total.tolist())
+    report["error"]["parts"] = {
+        "algebraic": _strict(error.algebraic.tolist()),
+        "discretisation": _strict(error.discretisation.tolist()),
+        "conservation": _strict(error.conservation.tolist()),
+    }
+    report["error"]["dominant"] = error.dominant
+    report["error"]["samples"] = error.samples
+    report["refinement"] = {
+        "receivers_solved": solved_receivers,
+        "receivers_added": refinement.added,
+        "rounds": refinement.rounds,
+        "by_object": refinement.by_object,
+        "change_rms": refinement.change_rms.tolist(),
+    }
+    return report
+
+
+def _strict(values: Any) -> Any:
+    """Nested lists of floats with non-finite values as None (strict JSON)."""
+    if isinstance(values, list):
+        return [_strict(v) for v in values]
+    if isinstance(values, float | np.floating) and not math.isfinite(values):
+        return None
+    return values
 
 
 def write_report(path: Path, report: dict[str, Any]) -> None:

@@ -19,7 +19,7 @@ from raytrad.formats.checkpoint import read_checkpoint, write_checkpoint
 from raytrad.scene import Scene, scene_digests
 
 #: Version of the checkpoint layout; a checkpoint of another layout is refused.
-LAYOUT = 2
+LAYOUT = 3
 
 
 def fingerprint(scene: Scene, system_settings: dict[str, Any]) -> dict[str, Any]:

@@ -18,9 +18,10 @@ import numpy as np
 
 from raytrad.constants import defaults
 from raytrad.core.mesh import RadiosityMesh
+from raytrad.core.shading import triangle_normals, twin_triangles
 from raytrad.core.visibility import Occluder
 from raytrad.errors import SettingsError
-from raytrad.products.image import primary_directions, triangle_normals, twin_triangles
+from raytrad.products.image import primary_directions
 from raytrad.scene import Camera, NamedCamera
 
 log = logging.getLogger(__name__)

@@ -14,6 +14,7 @@ import numpy as np
 
 from raytrad.constants import defaults
 from raytrad.core.mesh import RadiosityMesh
+from raytrad.core.shading import shade, triangle_normals, twin_triangles
 from raytrad.core.visibility import Occluder
 from raytrad.errors import SettingsError
 from raytrad.scene import Camera
@@ -42,21 +43,6 @@ def primary_directions(
         + (py * tan)[..., None] * up
     ).reshape(-1, 3)
     return np.asarray(direction / np.linalg.norm(direction, axis=1)[:, None])
-
-
-def twin_triangles(triangles: np.ndarray) -> np.ndarray:
-    """(T,) int64: the reversed copy of each triangle (other side of a two-sided surface),
-    or -1."""
-    key = np.sort(triangles, axis=1)
-    _, inverse, counts = np.unique(key, axis=0, return_inverse=True, return_counts=True)
-    inverse = inverse.reshape(-1)
-    twin = np.full(len(triangles), -1, dtype=np.int64)
-    pairs = counts[inverse] == 2
-    order = np.argsort(inverse[pairs], kind="stable")
-    members = np.nonzero(pairs)[0][order].reshape(-1, 2)
-    twin[members[:, 0]] = members[:, 1]
-    twin[members[:, 1]] = members[:, 0]
-    return twin
 
 
 def render_radiance(
@@ -104,55 +90,9 @@ def render_radiance(
                 hit, _, weights = occluder.intersect_barycentric_local(
                     np.broadcast_to(origin, direction.shape), direction
                 )
-                image += _shade(hit, weights, direction, mesh, radiosity, normal, twin).reshape(
+                image += shade(hit, weights, direction, mesh, radiosity, normal, twin).reshape(
                     height, width, 3
                 )
     finally:
         occluder.close()
     return (image / (side * side) / math.pi).astype(np.float32)
-
-
-def triangle_normals(mesh: RadiosityMesh) -> tuple[np.ndarray, np.ndarray]:
-    corners = mesh.positions[mesh.triangles]
-    cross = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
-    length = np.linalg.norm(cross, axis=1)
-    return length, cross / np.maximum(length, 1e-300)[:, None]
-
-
-def _shade(
-    hit: np.ndarray,
-    weights: np.ndarray,
-    direction: np.ndarray,
-    mesh: RadiosityMesh,
-    radiosity: np.ndarray,
-    normal: np.ndarray,
-    twin: np.ndarray,
-) -> np.ndarray:
-    """(N, 3) radiosity seen along each ray: the side of the surface facing the camera.
-
-    A hit on the back of a single-sided surface is black (no light leaves its back); on a
-    two-sided surface it takes the reversed copy, whose corners come in reverse order.
-    """
-    out = np.zeros((len(hit), 3))
-    ok = hit >= 0
-    tri = hit[ok]
-    w = weights[ok]
-    facing = np.einsum("ij,ij->i", normal[tri], direction[ok]) < 0
-    back = ~facing & (twin[tri] >= 0)
-    tri = np.where(back, twin[tri], tri)
-    w = np.where(back[:, None], _reversed_weights(mesh.triangles, hit[ok], tri, w), w)
-    visible = facing | back
-    values = np.einsum("nk,nkc->nc", w, radiosity[mesh.triangle_receivers[tri]])
-    out[np.nonzero(ok)[0][visible]] = values[visible]
-    return out
-
-
-def _reversed_weights(
-    triangles: np.ndarray, hit: np.ndarray, twin: np.ndarray, weights: np.ndarray
-) -> np.ndarray:
-    """Barycentric weights of the same point in the twin triangle (corners permuted)."""
-    out = np.zeros_like(weights)
-    for k in range(3):
-        match = triangles[twin] == triangles[hit][:, k : k + 1]
-        out += match * weights[:, k : k + 1]
-    return out

@@ -13,8 +13,9 @@ from collections.abc import Callable
 import numpy as np
 import pytest
 
-from raytrad.core.formfactor import FormFactorEngine
+from raytrad.core.formfactor import FormFactorEngine, receiver_points
 from raytrad.core.mesh import MeshSettings, RadiosityMesh, build_mesh
+from raytrad.core.pathtrace import path_traced_radiosity
 from raytrad.core.pipeline import Prepared
 from raytrad.core.solver import SolveResult
 from raytrad.core.visibility import Occluder, nothing_can_occlude
@@ -334,12 +335,29 @@ def test_room_edge_receivers_are_not_dark(
     assert len(edge) > 100
     ratio = radiosity / neighbours
     print(f"room edges: {len(edge)}, smallest ratio to neighbours {ratio.min():.3f}")
-    assert ratio.min() > 0.5
+    # No black seam; the darkest are the room's three-way corners, which the path tracer
+    # puts at about 0.4 of their neighbours (the near field resolves the dark corner).
+    assert ratio.min() > 0.3
+    order = np.argsort(ratio)[:4]
+    points, _ = receiver_points(prepared.mesh, 1e-5 * prepared.engine.diagonal)
+    darkest = edge[order]
+    irradiance, _ = path_traced_radiosity(
+        prepared.scene, points[darkest], prepared.mesh.receiver_normal[darkest], paths=4000, seed=3
+    )
+    mesh = prepared.mesh
+    traced = (
+        mesh.receiver_emitted_exitance[darkest] + mesh.receiver_reflectance[darkest] * irradiance
+    ).sum(axis=1)
+    print("darkest room-edge receivers, bake / path tracer:", radiosity[order] / traced)
+    np.testing.assert_allclose(radiosity[order], traced, rtol=0.15)
 
 
-def test_block_base_receivers_are_not_dark(
+def test_block_base_receivers_are_dark_as_the_path_tracer_says(
     cornell_fine: tuple[Prepared, SolveResult],
 ) -> None:
+    # A receiver where a block stands on the floor lies in a real contact shadow: the path
+    # tracer puts it at about a third of its neighbours 3 receivers up the side. Black
+    # (a ray leak) or as bright as its neighbours (no contact shadow) are both wrong.
     prepared, result = cornell_fine
     kinds = _cornell_triangle_kinds(prepared.scene)
     edge, radiosity, neighbours = _edge_ratios(
@@ -348,7 +366,18 @@ def test_block_base_receivers_are_not_dark(
     assert len(edge) > 20
     ratio = radiosity / neighbours
     print(f"block-base edges: {len(edge)}, smallest ratio to neighbours {ratio.min():.3f}")
-    assert ratio.min() > 0.5
+    assert ratio.min() > 0.2
+    darkest = edge[np.argsort(ratio)[:4]]
+    points, _ = receiver_points(prepared.mesh, 1e-5 * prepared.engine.diagonal)
+    normals = prepared.mesh.receiver_normal[darkest]
+    irradiance, _ = path_traced_radiosity(
+        prepared.scene, points[darkest], normals, paths=4000, seed=2
+    )
+    rho = prepared.mesh.receiver_reflectance[darkest]
+    traced = (rho * irradiance).sum(axis=1)
+    print("darkest base receivers, bake / path tracer:", radiosity[np.argsort(ratio)[:4]] / traced)
+    np.testing.assert_array_less(0.5 * traced, radiosity[np.argsort(ratio)[:4]])
+    np.testing.assert_array_less(radiosity[np.argsort(ratio)[:4]], 2.0 * traced)
 
 
 def _floor_and_block(make_quads: Callable[..., Scene], offset: tuple[float, float]) -> Scene:

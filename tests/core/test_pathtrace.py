@@ -63,6 +63,7 @@ def test_path_tracer_reproduces_the_white_furnace() -> None:
     assert np.all(error < 0.02 * expected)
 
 
+@pytest.mark.slow
 def test_cornell_box_agrees_with_path_tracing() -> None:
     difference, noise = _compare(5000, 400, SMOOTH_POINTS)
     print("relative difference per point and channel:\n", np.round(difference, 4))

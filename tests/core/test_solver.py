@@ -52,14 +52,16 @@ def test_white_furnace(
     # reflected with rho and interreflected with 1 / (1 - rho), is at most
     # rho tol A E / (1 - rho) of missing power: an area-weighted mean relative error of
     # rho * tol, plus what balancing the vertex-to-patch factors leaves (well below tol
-    # here). No receiver may be off by more than twice the tolerance.
+    # here). The unshot radiosity left is not spread evenly: it sits where near receivers
+    # gather along the box's edges, a fixed multiple (about 2.3) of the tolerance there
+    # whatever the tolerance. No receiver may be off by more than three times it.
     prepared = prepare_furnace(reflectance, 1.0)
     result = _solve(prepared, method=method, tolerance=tolerance)
     assert result.stop_reason == "converged"
     area = prepared.mesh.receiver_area
     relative = np.abs(result.radiosity * (1.0 - reflectance) - 1.0)
     assert (area @ relative / area.sum() <= tolerance).all()
-    assert relative.max() <= 2.0 * tolerance
+    assert relative.max() <= 3.0 * tolerance
 
 
 @pytest.mark.parametrize("method", METHODS)
@@ -162,9 +164,13 @@ def test_residual_counts_negative_unshot_radiosity(cornell: Prepared) -> None:
     assert result.stop_reason == "converged"
     assert shot_back, "no negative amount was ever shot"
     area = cornell.mesh.patch_area
-    absolute = float((area @ np.abs(result.state.unshot)).sum()) / result.emitted_power.sum()
-    assert absolute <= tolerance
-    assert result.residual == pytest.approx(absolute, rel=1e-12)
+    emitted = result.emitted_power.sum()
+    absolute = float((area @ np.abs(result.state.unshot)).sum()) / emitted
+    assert absolute <= result.residual <= tolerance
+    # the residual also counts how the unshot radiosity spreads within each patch (what
+    # near receivers see), sum_p A_p sum_k W_pk |dB_pk - dB_p|
+    spread = float((area @ result.state.spread).sum()) / emitted
+    assert result.residual == pytest.approx(absolute + spread, rel=1e-12)
     np.testing.assert_allclose(result.unshot_power, area @ result.state.unshot, rtol=1e-12)
 
 

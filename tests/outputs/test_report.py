@@ -34,6 +34,7 @@ COLUMNS = (
     "bound_max",
     "true_rms",
     "true_max",
+    "total_rms",
 )
 
 
@@ -188,6 +189,8 @@ def test_timings_name_every_stage(furnace_run: tuple[Path, dict[str, Any]]) -> N
         "form_factors",
         "reference",
         "solve",
+        "refine",
+        "error",
         "write",
     }
     assert all(isinstance(v, float) and v >= 0 for v in timings.values())
@@ -227,6 +230,10 @@ def test_convergence_log_holds_what_is_plotted(furnace_run: tuple[Path, dict[str
         assert report["error"][name] == log[name][-1], name
     # and the true error is against B = 2: below the tolerance-implied level at the end
     assert max(report["error"]["true_rms"]) < 1e-2
+    # the total error estimate covers the true error at every log point
+    total = np.array([[math.inf if v is None else v for v in row] for row in log["total_rms"]])
+    assert np.all(total >= true)
+    assert report["error"]["total_rms"] == log["total_rms"][-1]
 
 
 def test_render_without_plot_imports_neither_matplotlib_nor_colour(tmp_path: Path) -> None:

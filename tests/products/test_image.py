@@ -13,10 +13,12 @@ import pytest
 from raytrad import api
 from raytrad.cli import main
 from raytrad.core.mesh import MeshSettings, RadiosityMesh
-from raytrad.core.pipeline import prepare
+from raytrad.core.pipeline import Prepared, prepare
+from raytrad.core.shading import twin_triangles
+from raytrad.core.solver import SolveResult
 from raytrad.formats.images import read_image
 from raytrad.products.framing import automatic_camera, framing_camera
-from raytrad.products.image import render_radiance, twin_triangles
+from raytrad.products.image import render_radiance
 from raytrad.scene import Camera, Scene, make_scene
 from raytrad.scene.builtin import cornell_box, furnace_box
 from raytrad.settings import RenderSettings
@@ -26,10 +28,16 @@ CORNELL_CAMERA = Camera((0.278, 0.273, -0.8), (0.278, 0.273, 0.0), (0.0, 1.0, 0.
 
 
 @pytest.fixture(scope="module")
-def cornell_image() -> np.ndarray:
-    prepared, result = api.solve_scene(
+def cornell_solved() -> tuple[Prepared, SolveResult]:
+    """The Cornell box at 4000 receivers, solved and refined."""
+    return api.solve_scene(
         cornell_box(), RenderSettings(mesh=MeshSettings(receivers=4000, patches=200))
     )
+
+
+@pytest.fixture(scope="module")
+def cornell_image(cornell_solved: tuple[Prepared, SolveResult]) -> np.ndarray:
+    prepared, result = cornell_solved
     return render_radiance(prepared.mesh, result.radiosity, CORNELL_CAMERA, 96, 96, 4)
 
 
@@ -55,10 +63,10 @@ def test_cornell_left_wall_is_redder_than_the_right(cornell_image: np.ndarray) -
     assert right[1] > right[0]
 
 
-def test_region_under_the_light_is_the_brightest_receiving_area() -> None:
-    prepared, result = api.solve_scene(
-        cornell_box(), RenderSettings(mesh=MeshSettings(receivers=4000, patches=200))
-    )
+def test_region_under_the_light_is_the_brightest_receiving_area(
+    cornell_solved: tuple[Prepared, SolveResult],
+) -> None:
+    prepared, result = cornell_solved
     mesh = prepared.mesh
     emitting = (mesh.receiver_emitted_exitance > 0).any(axis=1)
     lum = result.radiosity @ np.array([0.2126, 0.7152, 0.0722])
@@ -139,7 +147,8 @@ def test_render_writes_image_lightmap_and_gltf_that_load_back(tmp_path: Path) ->
     colours = np.asarray(loaded.visual.vertex_attributes["color"])[:, :3]
     assert loaded.visual.material.emissiveTexture.size == (128, 128)
     exposure = header["extras"]["raytrad"]["exposure"]  # type: ignore[index]
-    np.testing.assert_allclose(colours, min(1.0, 2.0 / math.pi * exposure), rtol=1e-3)
+    # the solve's tolerance 1e-3 leaves up to about 2.3e-3 at the box's edges
+    np.testing.assert_allclose(colours, min(1.0, 2.0 / math.pi * exposure), rtol=3e-3)
     view = header["bufferViews"][header["images"][0]["bufferView"]]  # type: ignore[index]
     data = (out / "furnace.glb").read_bytes()
     json_length = struct.unpack_from("<I", data, 12)[0]

@@ -8,7 +8,13 @@ scene (a box holding a block) checks that occlusion does not lose energy.
 
 from __future__ import annotations
 
+import numpy as np
 import pytest
+
+from raytrad.core import pipeline
+from raytrad.core.mesh import MeshSettings
+from raytrad.core.solver import SolveSettings, solve
+from raytrad.scene.builtin import furnace_box
 
 from .cases import HIGH_RHO, OPEN_RHO, assert_finished, assert_within, case, run_case
 
@@ -43,3 +49,20 @@ def test_power_balance_with_a_block_standing_on_the_floor() -> None:
     run = run_case(case(f"block-standing-{OPEN_RHO}"))
     assert_finished(run)
     assert_within(run)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(
+    ("receivers", "rho"), [(300, 0.9999), (2000, 0.999), (2000, 0.9999), (20000, 0.99)]
+)
+def test_furnace_conserves_at_any_mesh_size(receivers: int, rho: float) -> None:
+    # Balancing rows and columns jointly (no capping) and power-conserving near-field
+    # shots: a coarse closed box loses nothing, even at rho = 0.9999 where 0.01% lost
+    # per bounce would be 100% of the answer. The default settings otherwise.
+    prepared = pipeline.prepare(furnace_box(rho, 1.0), MeshSettings(receivers=receivers))
+    try:
+        result = solve(prepared.mesh, prepared.engine, SolveSettings(max_shots=400_000))
+    finally:
+        prepared.close()
+    assert result.stop_reason == "converged"
+    np.testing.assert_allclose(result.radiosity * (1.0 - rho), 1.0, rtol=5e-3)

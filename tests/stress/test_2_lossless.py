@@ -51,7 +51,9 @@ def test_reflectance_one_in_a_channel_without_emission_is_solved() -> None:
     )
     _, result = api.solve_scene(furnace_box((0.5, 1.0, 0.5), (1.0, 0.0, 1.0)), settings)
     assert result.stop_reason == "converged"
-    np.testing.assert_allclose(result.radiosity[:, [0, 2]], 2.0, rtol=2e-3)  # twice the tolerance
+    np.testing.assert_allclose(
+        result.radiosity[:, [0, 2]], 2.0, rtol=3e-3
+    )  # three times the tolerance (test_solver)
     assert (result.radiosity[:, 1] == 0.0).all()
 
 

@@ -10,6 +10,7 @@ panel in the middle of a cube.
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from .cases import (
     BULB_EXITANCE,
@@ -46,6 +47,7 @@ def test_tiny_bright_bulb_in_a_huge_hall() -> None:
     assert (run.result.radiosity[below] > 0.9 * direct).all()
 
 
+@pytest.mark.slow
 def test_a_thousand_small_emitters() -> None:
     # 1000 double-sided triangles of 2e-4 m2 at 100 W m-2: 40 W, sum a B = 400 W.
     run = run_case(case("1000-emitters"))

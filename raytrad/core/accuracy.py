@@ -1,0 +1,325 @@
+"""How wrong is the bake against the physical answer: the total error and its parts.
+
+The algebraic error log (:mod:`raytrad.core.convergence`) covers only how far the shooting
+is from the solution of the *discrete* system. The bake also differs from the physical
+answer because of the discretisation. Every figure here is a relative RMS per channel over
+the receivers that do not emit (:func:`~raytrad.core.convergence.counted_receivers`).
+
+* **discretisation** (the residual check): the residual of the continuous radiosity
+  equation ``r(x) = E(x) + rho(x) H[B](x) - B(x)`` at ``samples`` points drawn
+  area-uniformly on the (refined) mesh, where ``B(x)`` is what the bake shows there (the
+  vertex radiosity interpolated over the triangle) and ``H[B](x)`` the irradiance the bake
+  sends to the point, estimated by Monte Carlo independently of patches, form factors and
+  visibility samples: direct light by stratified emitter sampling, the rest by stratified
+  cosine-distributed rays reading the bake where they land. The residual's RMS, with the
+  Monte Carlo noise subtracted and one standard error of its own estimate added, is
+  amplified by interreflection: the error ``e`` solves ``(I - K) e = r``, and
+  ``|e| <~ |r| / (1 - rho g)`` with rho the mean reflectance and g the mean capture
+  fraction of the patches. It sees every way the bake misses the equation: linear
+  interpolation across shadow edges and contact lines, the patch-average bias, sampled
+  visibility, energy lost by the discrete system, and the algebraic error of the final
+  state itself;
+* **algebraic**: the solve's own estimate of the change still to come
+  (:func:`~raytrad.core.convergence.error_estimate`) at its end; the guaranteed bound
+  stays in the error log under its own name;
+* **conservation**: closed receivers whose form-factor rows could not be held to 1,
+  amplified by interreflection, ``rho delta / (1 - rho)``.
+
+The total at the end is ``sqrt(max(discretisation, algebraic)^2 + conservation^2)``:
+``error.total_rms`` in ``report.json``. The ``total_rms`` column of the error log adds,
+at every earlier log point, that point's guaranteed algebraic bound to the final total
+(the error there is at most the way still to go plus the final error).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from raytrad.constants import tol
+from raytrad.core.formfactor import FormFactorEngine
+from raytrad.core.mesh import RadiosityMesh
+from raytrad.core.pathtrace import Tracer, cosine_directions_from
+from raytrad.core.shading import shade, triangle_normals, twin_triangles
+from raytrad.core.visibility import Occluder
+from raytrad.scene import Scene
+
+#: Points sampled for the discretisation part.
+SAMPLES = 2048
+
+#: Rays per point for the discretisation part: a quarter sample the emitters, the rest
+#: the hemisphere, stratified.
+RAYS = 1024
+
+#: Points traced together (memory: about 200 bytes per ray).
+_CHUNK = 64
+
+
+@dataclass(frozen=True)
+class ErrorParts:
+    """The estimated total error of a bake and its parts, relative RMS per channel [1].
+
+    Attributes
+    ----------
+    algebraic, discretisation, conservation : (3,) float64
+        See the module docstring.
+    samples : int
+        Points the discretisation part was measured at.
+    """
+
+    algebraic: np.ndarray
+    discretisation: np.ndarray
+    conservation: np.ndarray
+    samples: int = 0
+
+    @property
+    def total(self) -> np.ndarray:
+        """(3,) float64: ``sqrt(max(discretisation, algebraic)^2 + conservation^2)``."""
+        measured = np.maximum(self.discretisation, self.algebraic)
+        return np.asarray(np.sqrt(measured**2 + self.conservation**2))
+
+    @property
+    def dominant(self) -> str:
+        """The name of the largest part (worst channel)."""
+        parts = {
+            "algebraic": float(np.max(self.algebraic)),
+            "discretisation": float(np.max(self.discretisation)),
+            "conservation": float(np.max(self.conservation)),
+        }
+        return max(parts, key=lambda name: parts[name])
+
+
+@dataclass(frozen=True)
+class Residual:
+    """The Monte Carlo residual check of a bake (see the module docstring).
+
+    Attributes
+    ----------
+    error : (3,) float64
+        The discretisation error estimate [1]: ``residual`` (plus one standard error)
+        times ``gain``.
+    residual : (3,) float64
+        RMS of the residual with the Monte Carlo noise subtracted, relative [1].
+    noise : (3,) float64
+        RMS of the Monte Carlo noise of the points' estimates, relative [1].
+    gain : (3,) float64
+        Interreflection amplification ``1 / (1 - rho g)`` [1].
+    samples : int
+    """
+
+    error: np.ndarray
+    residual: np.ndarray
+    noise: np.ndarray
+    gain: np.ndarray
+    samples: int
+
+
+def discretisation_error(
+    scene: Scene,
+    mesh: RadiosityMesh,
+    radiosity: np.ndarray,
+    counted: np.ndarray,
+    capture: float,
+    samples: int = SAMPLES,
+    rays: int = RAYS,
+    seed: int = 0,
+) -> Residual:
+    """The discretisation error of a bake, from the residual of the radiosity equation.
+
+    Parameters
+    ----------
+    scene : Scene
+        The repaired scene (its emitters are sampled for direct light).
+    mesh : RadiosityMesh
+        The mesh ``radiosity`` lives on (refined or not).
+    radiosity : (R, 3) float64 [W m-2]
+        The baked radiosity per receiver.
+    counted : (R,) bool
+        Receivers the error is taken over (:func:`~raytrad.core.convergence.counted_receivers`).
+    capture : float
+        Mean fraction of what a patch shoots that lands on surfaces [1].
+    samples : int
+        Points drawn area-uniformly over counted triangles whose corners are all seen.
+    rays : int
+        Rays per point.
+    seed : int
+
+    Returns
+    -------
+    Residual
+        Zeros when there is nothing to sample or nothing reflects.
+    """
+    area = mesh.receiver_area * counted
+    norm = np.sqrt(area @ radiosity**2 / max(float(area.sum()), 1e-300))
+    seen = (mesh.receiver_area > 0) & counted
+    usable = seen[mesh.triangle_receivers].all(axis=1) & (mesh.triangle_area > 0)
+    zero = np.zeros(3)
+    if samples < 1 or rays < 2 or not usable.any() or not (norm > 0).any():
+        return Residual(zero, zero, zero, np.ones(3), 0)
+    rng = np.random.default_rng(seed)
+    tri, weights = _surface_samples(mesh, usable, samples, rng)
+    receivers = mesh.triangle_receivers[tri]
+    shown = np.einsum("nk,nkc->nc", weights, radiosity[receivers])
+    irradiance, variance, shut = _gathered(scene, mesh, radiosity, tri, weights, rays, rng)
+    rho = mesh.receiver_reflectance[receivers[:, 0]]
+    residual = mesh.receiver_emitted_exitance[receivers[:, 0]] + rho * irradiance - shown
+    noise = rho**2 * variance
+    # a point shut in (the gap behind a lamp) is seen by no one, like a hidden receiver
+    residual, noise, samples = residual[~shut], noise[~shut], int((~shut).sum())
+    if samples == 0:
+        return Residual(zero, zero, zero, np.ones(3), 0)
+    excess = residual**2 - noise  # unbiased per point: E[r^2] = r_true^2 + noise
+    mean = np.maximum(excess.mean(axis=0), 0.0)
+    spread = excess.std(axis=0) / np.sqrt(samples)
+    rel = np.where(norm > 0, 1.0 / np.where(norm > 0, norm, 1.0), 0.0)
+    reflectance = area @ mesh.receiver_reflectance / max(float(area.sum()), 1e-300)
+    gain = 1.0 / np.maximum(1.0 - reflectance * min(capture, 1.0), 1e-6)
+    return Residual(
+        error=np.sqrt(mean + spread) * rel * gain,
+        residual=np.sqrt(mean) * rel,
+        noise=np.sqrt(noise.mean(axis=0)) * rel,
+        gain=gain,
+        samples=samples,
+    )
+
+
+def _surface_samples(
+    mesh: RadiosityMesh, usable: np.ndarray, samples: int, rng: np.random.Generator
+) -> tuple[np.ndarray, np.ndarray]:
+    """Area-uniform points on the ``usable`` triangles: (N,) triangle, (N, 3) weights."""
+    area = np.where(usable, mesh.triangle_area, 0.0)
+    cumulative = np.cumsum(area)
+    tri = np.searchsorted(cumulative, rng.random(samples) * cumulative[-1], side="right")
+    tri = np.minimum(tri, len(area) - 1)
+    u, v = rng.random(samples), rng.random(samples)
+    flip = u + v > 1.0
+    u, v = np.where(flip, 1.0 - u, u), np.where(flip, 1.0 - v, v)
+    return tri, np.stack([1.0 - u - v, u, v], axis=1)
+
+
+def _gathered(
+    scene: Scene,
+    mesh: RadiosityMesh,
+    radiosity: np.ndarray,
+    tri: np.ndarray,
+    weights: np.ndarray,
+    rays: int,
+    rng: np.random.Generator,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(N, 3) irradiance the bake sends to the sample points, its variance, and (N,) bool
+    which points are shut in.
+
+    Direct light by emitter sampling (:meth:`~raytrad.core.pathtrace.Tracer.direct`),
+    the rest by stratified cosine-distributed rays reading the bake's *reflected*
+    radiosity ``B - E`` where they land (emission is the direct part's). The rays form two
+    independent halves (a checkerboard of the strata, half the emitter samples each):
+    with ``H_a``, ``H_b`` their estimates, ``H = (H_a + H_b) / 2`` has variance
+    ``E[(H_a - H_b)^2] / 4``, unbiased however well stratification works. A point is shut
+    in when most of its rays hit the back of single-sided surfaces (as
+    :meth:`~raytrad.core.visibility.Occluder.probe_hemispheres` decides for receivers).
+    """
+    side = max(2, int(np.sqrt(rays * 3 // 4)) // 2 * 2)  # strata per axis, even
+    light_side = max(2, int(np.sqrt(max(rays - side * side, 4))) // 2 * 2)
+    points = np.einsum("nk,nkj->nj", weights, mesh.positions[mesh.triangles[tri]])
+    normals = mesh.triangle_normal[tri]
+    reflected = radiosity - mesh.receiver_emitted_exitance
+    _, triangle_normal = triangle_normals(mesh)
+    twin = twin_triangles(mesh.triangles)
+    irradiance = np.zeros((len(tri), 3))
+    variance = np.zeros((len(tri), 3))
+    shut = np.zeros(len(tri), dtype=bool)
+    occluder = Occluder(mesh.positions, mesh.triangles)
+    try:
+        tracer = Tracer(scene, occluder, rng)
+        origin = occluder.to_local(points) + tol.ray_margin * occluder.diagonal * normals
+        for start in range(0, len(tri), _CHUNK):
+            part = slice(start, min(start + _CHUNK, len(tri)))
+            n = part.stop - part.start
+            u = _strata(n, light_side, rng)
+            o = np.repeat(origin[part], light_side**2, axis=0)
+            light = tracer.direct(o, np.repeat(normals[part], light_side**2, axis=0), u)
+            u = _strata(n, side, rng)
+            normal = np.repeat(normals[part], side**2, axis=0)
+            direction = cosine_directions_from(normal, u[:, 0], u[:, 1])
+            o = np.repeat(origin[part], side**2, axis=0)
+            hit, _, w = occluder.intersect_barycentric_local(o, direction)
+            seen = shade(hit, w, direction, mesh, reflected, triangle_normal, twin)
+            halves = _halves(light, n, light_side) + _halves(seen, n, side)  # (n, 2, 3)
+            irradiance[part] = halves.mean(axis=1)
+            variance[part] = (halves[:, 0] - halves[:, 1]) ** 2 / 4.0
+            back = _back_hits(hit, direction, triangle_normal, twin)
+            shut[part] = back.reshape(n, -1).mean(axis=1) > 0.5
+    finally:
+        occluder.close()
+    return irradiance, variance, shut
+
+
+def _strata(n: int, side: int, rng: np.random.Generator) -> np.ndarray:
+    """(n * side^2, 2) uniforms in [0, 1): for each of n points, one jittered sample in
+    each cell of a ``side`` x ``side`` grid."""
+    i, j = np.divmod(np.arange(side * side), side)
+    jitter = rng.random((n, side * side, 2))
+    return ((np.stack([i, j], axis=1)[None] + jitter) / side).reshape(-1, 2)
+
+
+def _halves(values: np.ndarray, n: int, side: int) -> np.ndarray:
+    """(n, 2, 3): the means of (n * side^2, 3) stratified values over the two colours of
+    the strata's checkerboard, two independent estimates per point."""
+    i, j = np.divmod(np.arange(side * side), side)
+    black = (i + j) % 2 == 0
+    values = values.reshape(n, side * side, 3)
+    return np.stack([values[:, black].mean(axis=1), values[:, ~black].mean(axis=1)], axis=1)
+
+
+def _back_hits(
+    hit: np.ndarray, direction: np.ndarray, normal: np.ndarray, twin: np.ndarray
+) -> np.ndarray:
+    """(N,) bool: rays that hit the back of a single-sided triangle."""
+    out = np.zeros(len(hit), dtype=bool)
+    ok = np.nonzero(hit >= 0)[0]
+    tri = hit[ok]
+    out[ok] = (np.einsum("ij,ij->i", normal[tri], direction[ok]) > 0) & (twin[tri] < 0)
+    return out
+
+
+def conservation_error(engine: FormFactorEngine, mesh: RadiosityMesh) -> np.ndarray:
+    """Relative radiosity error from rows of closed receivers not summing to 1.
+
+    ``(1 / A) sum_j a_j |1 - sum_p F_jp| rho_j / (1 - rho_m)`` over the closed receivers,
+    ``rho_m`` the area-weighted mean reflectance (a lost fraction delta of what a receiver
+    gathers is lost again at every bounce).
+
+    Returns
+    -------
+    (3,) float64 [1]
+    """
+    closed = engine.closed_rows
+    if closed is None or not closed.any():
+        return np.zeros(3)
+    deficit = np.abs(1.0 - engine.row_sums())
+    a = mesh.receiver_area * closed
+    total = float(mesh.receiver_area.sum())
+    rho = mesh.receiver_reflectance
+    mean_rho = (mesh.receiver_area @ rho) / max(total, 1e-300)
+    lost = (a * deficit) @ rho / max(total, 1e-300)
+    return np.asarray(lost / np.maximum(1.0 - mean_rho, 1e-12))
+
+
+def total_error_column(bound_rms: list[list[float]], parts: ErrorParts) -> list[list[float]]:
+    """The ``total_rms`` column of an error log: at each log point but the last, its
+    algebraic bound plus the final total; at the last, the final total."""
+    total = parts.total
+    rows = [(np.asarray(row, dtype=np.float64) + total).tolist() for row in bound_rms[:-1]]
+    return [*rows, total.tolist()] if bound_rms else []
+
+
+__all__ = [
+    "RAYS",
+    "SAMPLES",
+    "ErrorParts",
+    "Residual",
+    "conservation_error",
+    "discretisation_error",
+    "total_error_column",
+]

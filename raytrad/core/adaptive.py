@@ -1,0 +1,413 @@
+"""Adaptive refinement: more receivers where the light changes fast across an element.
+
+After the solve, every refined triangle whose corners' radiosity differs by more than the
+threshold (relative to its own level, with a floor at a fraction of the scene's mean so
+that noise in the dark does not count) is split, conformingly: the longest-edge closure of
+:func:`raytrad.core.refine.refine` splits neighbours as needed, so no T-junction appears.
+The new receivers get their radiosity by a final gather over the solve's shooting patches
+(:meth:`~raytrad.core.formfactor.FormFactorEngine.gather_at`: their own visibility rays,
+the patches' converged radiosity, the near field as it varies across a patch). Shadow
+boundaries, contact lines and the surroundings of lamps are refined; flat regions are not.
+Rounds repeat until no element exceeds the threshold or the receiver budget is spent.
+
+The patches, their sub-areas and the solved system stay as they are; the existing
+receivers keep their index and their radiosity. What a new receiver's gathered value
+differs from the interpolation it replaces measures the discretisation error there
+(``change_rms`` in the returned :class:`Refinement`).
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from raytrad.constants import tol
+from raytrad.core.formfactor import ROW_FIX_LIMIT, FormFactorEngine, receiver_points
+from raytrad.core.gather import gathered_irradiance
+from raytrad.core.mesh import RadiosityMesh, surface_receivers
+from raytrad.core.refine import refine
+from raytrad.core.visibility import Occluder
+from raytrad.errors import SettingsError
+from raytrad.scene import Scene, triangle_areas_normals
+
+log = logging.getLogger(__name__)
+
+#: Final-gather passes over the new receivers of a round: the first reads its new
+#: neighbours' interpolated radiosity, the next what they gathered (same factors).
+GATHER_PASSES = 2
+
+#: Luminance weights of linear Rec. 709 RGB, to compare radiosity across channels.
+_LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
+
+
+@dataclass(frozen=True)
+class RefineSettings:
+    """When and how far to refine.
+
+    Attributes
+    ----------
+    threshold : float
+        Split a triangle whose corners' luminance spreads by more than this fraction of
+        its mean (the mean floored at ``floor`` x the scene's mean) [1]; 0 disables.
+    max_receivers : int or None
+        Receiver budget of the refined mesh; None: twice the receivers before refinement.
+    rounds : int
+        Most refinement rounds.
+    smallest : float
+        Triangles whose longest edge is below this fraction of the scene's diagonal are
+        not split [1].
+    floor : float
+        See ``threshold`` [1].
+    """
+
+    threshold: float = 0.1
+    max_receivers: int | None = None
+    rounds: int = 6
+    smallest: float = 2e-3
+    floor: float = 0.05
+
+    def __post_init__(self) -> None:
+        if not (self.threshold >= 0 and np.isfinite(self.threshold)):
+            raise SettingsError(f"refine threshold must be >= 0, got {self.threshold}")
+        if self.max_receivers is not None and self.max_receivers < 1:
+            raise SettingsError(f"max receivers must be at least 1, got {self.max_receivers}")
+        if self.rounds < 0:
+            raise SettingsError(f"refinement rounds must be >= 0, got {self.rounds}")
+
+
+@dataclass
+class Refinement:
+    """What adaptive refinement did.
+
+    Attributes
+    ----------
+    mesh : RadiosityMesh
+        The refined mesh (the input mesh when nothing was refined).
+    radiosity : (R', 3) float64 [W m-2]
+        Radiosity of its receivers: the solve's for the old ones, gathered for the new.
+    added : int
+        Receivers added.
+    rounds : int
+        Rounds that added receivers.
+    by_object : dict of str to int
+        Receivers added per scene object.
+    change_rms : (3,) float64
+        Relative RMS (area-weighted) of what the new receivers' gathered radiosity
+        changed against the interpolation it replaced [1]: the discretisation error the
+        refinement found.
+    """
+
+    mesh: RadiosityMesh
+    radiosity: np.ndarray
+    added: int = 0
+    rounds: int = 0
+    by_object: dict[str, int] = field(default_factory=dict)
+    change_rms: np.ndarray = field(default_factory=lambda: np.zeros(3))
+
+
+def refine_adaptively(
+    scene: Scene,
+    mesh: RadiosityMesh,
+    engine: FormFactorEngine,
+    occluder: Occluder | None,
+    radiosity: np.ndarray,
+    settings: RefineSettings,
+) -> Refinement:
+    """Refine ``mesh`` where ``radiosity`` changes fast and gather the new receivers.
+
+    Parameters
+    ----------
+    scene : Scene
+        The (repaired) scene ``mesh`` was built from.
+    mesh : RadiosityMesh
+    engine : FormFactorEngine
+        The balanced engine of the solve (its patches shoot to the new receivers).
+    occluder : Occluder or None
+        The scene's visibility structure (None: nothing occludes).
+    radiosity : (R, 3) float64
+        The solution at ``mesh``'s receivers [W m-2].
+    settings : RefineSettings
+    """
+    budget = settings.max_receivers or 2 * mesh.receiver_count
+    out = Refinement(mesh, np.asarray(radiosity, dtype=np.float64))
+    if settings.threshold <= 0:
+        return out
+    patch_radiosity = patch_means(mesh, radiosity)
+    smallest = settings.smallest * engine.diagonal
+    changes: list[tuple[np.ndarray, np.ndarray]] = []
+    for _ in range(settings.rounds):
+        room = budget - out.mesh.receiver_count
+        split = _to_split(out.mesh, out.radiosity, settings, smallest, room)
+        if not split.any():
+            break
+        refined, parent = subdivide(out.mesh, split)
+        new = np.arange(out.mesh.receiver_count, refined.receiver_count)
+        if len(new) == 0:
+            break
+        before = _interpolated(out.mesh, out.radiosity, refined, parent, new)
+        # the near field is gathered from the refined mesh: a receiver close to a sharp
+        # edge (a shadow at a block's corner) sees it as sharp as the mesh has it now
+        current = np.concatenate([out.radiosity, before])
+        near = engine.refined(refined)
+        try:
+            refined, gathered = _gather(
+                scene, refined, near, occluder, current, patch_radiosity, new
+            )
+        finally:
+            near.close()
+        changes.append((before - gathered, refined.receiver_area[new]))
+        out.radiosity = np.concatenate([out.radiosity, gathered])
+        out.mesh = refined
+        out.added += len(new)
+        out.rounds += 1
+    if out.added:
+        owner = scene.object_index[out.mesh.triangle_source]
+        first = np.full(out.mesh.receiver_count, -1)
+        first[out.mesh.triangle_receivers.reshape(-1)] = np.repeat(owner, 3)
+        added = first[mesh.receiver_count :]
+        counts = np.bincount(added[added >= 0], minlength=len(scene.object_names))
+        out.by_object = {n: int(c) for n, c in zip(scene.object_names, counts, strict=True) if c}
+        out.change_rms = _change_rms(changes, out.mesh, out.radiosity)
+        log.info(
+            "refinement: %d receivers added in %d rounds (%s)",
+            out.added,
+            out.rounds,
+            ", ".join(f"{n} {c}" for n, c in out.by_object.items()),
+        )
+    return out
+
+
+def _to_split(
+    mesh: RadiosityMesh,
+    radiosity: np.ndarray,
+    settings: RefineSettings,
+    smallest: float,
+    room: int,
+) -> np.ndarray:
+    """(T,) bool: the triangles to split this round, worst first within ``room`` receivers."""
+    if room <= 0:
+        return np.zeros(len(mesh.triangles), dtype=bool)
+    luminance = radiosity @ _LUMINANCE
+    visible = mesh.receiver_area > 0
+    level = float(np.average(luminance[visible], weights=mesh.receiver_area[visible]))
+    corner = luminance[mesh.triangle_receivers]
+    corner_seen = visible[mesh.triangle_receivers]
+    spread = np.ptp(corner, axis=1) / np.maximum(corner.mean(axis=1), settings.floor * level)
+    # a triangle with hidden and visible corners straddles a contact line (a block's
+    # base on the floor): what it shows there is a guess, so it is always refined
+    straddles = corner_seen.any(axis=1) & ~corner_seen.all(axis=1)
+    spread = np.where(straddles, np.inf, np.where(corner_seen.all(axis=1), spread, 0.0))
+    corners = mesh.positions[mesh.triangles]
+    longest = np.linalg.norm(corners - np.roll(corners, 1, axis=1), axis=2).max(axis=1)
+    candidate = (spread > settings.threshold) & (longest > smallest)
+    order = np.argsort(-np.where(candidate, spread, -np.inf), kind="stable")
+    # each split adds about one receiver per triangle (a midpoint shared by two)
+    keep = order[: min(int(candidate.sum()), max(1, room // 2))]
+    out = np.zeros(len(mesh.triangles), dtype=bool)
+    out[keep] = True
+    return out
+
+
+def subdivide(mesh: RadiosityMesh, split: np.ndarray) -> tuple[RadiosityMesh, np.ndarray]:
+    """The mesh with the ``split`` ((T,) bool) triangles bisected, conformingly.
+
+    Receivers keep their index (new ones are appended); patches and sub-areas are
+    unchanged, new triangles inherit their parent's patch, sub-area, source triangle and
+    surface. Receivers of the new vertices are not yet gathered or probed: their
+    ``receiver_visible`` is True.
+
+    Returns
+    -------
+    mesh : RadiosityMesh
+    parent : (T',) int64, the input triangle each new triangle lies in
+    """
+    if mesh.triangle_surface is None:
+        raise ValueError("adaptive refinement needs the mesh's triangle surfaces")
+    corners = mesh.positions[mesh.triangles]
+    longest = np.linalg.norm(corners - np.roll(corners, 1, axis=1), axis=2).max(axis=1)
+    limit = np.where(split, 0.75 * longest, np.inf)
+    positions, triangles, parent = refine(
+        mesh.positions, mesh.triangles, limit, max_rounds=1, quiet=True
+    )
+    surface = mesh.triangle_surface[parent]
+    area, normal = triangle_areas_normals(positions[triangles])
+    receivers, r_pos, r_normal, r_area, r_inward = surface_receivers(
+        positions, triangles, surface, area, normal
+    )
+    old = mesh.receiver_count
+    if not np.array_equal(r_pos[:old], mesh.receiver_position):
+        raise RuntimeError("refinement renumbered existing receivers")
+    # a new receiver's material is that of the old receivers of its triangle's surface
+    material_of = np.empty(len(r_pos), dtype=np.int64)
+    material_of[receivers.reshape(-1)] = np.repeat(mesh.triangle_receivers[parent][:, 0], 3)
+    visible = np.ones(len(r_pos), dtype=bool)
+    if mesh.receiver_visible is not None:
+        visible[:old] = mesh.receiver_visible
+    refined = replace(
+        mesh,
+        receiver_position=r_pos,
+        receiver_normal=r_normal,
+        receiver_area=r_area * visible,
+        receiver_inward=r_inward,
+        receiver_reflectance=mesh.receiver_reflectance[material_of],
+        receiver_emitted_exitance=mesh.receiver_emitted_exitance[material_of],
+        triangle_receivers=receivers,
+        triangle_area=area,
+        triangle_normal=normal,
+        triangle_patch=mesh.triangle_patch[parent],
+        triangle_subarea=mesh.triangle_subarea[parent],
+        triangle_source=mesh.triangle_source[parent],
+        triangle_surface=surface,
+        positions=positions,
+        triangles=triangles,
+        receiver_visible=visible,
+    )
+    return refined, parent
+
+
+def final_gather(
+    scene: Scene,
+    engine: FormFactorEngine,
+    occluder: Occluder | None,
+    radiosity: np.ndarray,
+    patch_radiosity: np.ndarray,
+    points: np.ndarray,
+    normals: np.ndarray,
+    reflectance: np.ndarray,
+    emitted_exitance: np.ndarray,
+    own: np.ndarray | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Radiosity at surface points gathered from a solution, and which points are hidden.
+
+    ``B(x) = E + rho sum_p F(x <- p) (B̄_p + [B̃_xp - B̄_p])``
+    (:meth:`~raytrad.core.formfactor.FormFactorEngine.gather_at`); a point that sees
+    surfaces all round (probe rays) has its factors summed to 1 as balancing does; a
+    point shut in (under a block) keeps its emission.
+
+    Parameters
+    ----------
+    scene : Scene
+        The repaired scene (for the probe rays' hit sides).
+    engine : FormFactorEngine
+        On the mesh whose ``radiosity`` is given (:meth:`FormFactorEngine.refined`).
+    occluder : Occluder or None
+    radiosity : (R, 3) float64 [W m-2]
+    patch_radiosity : (P, 3) float64 [W m-2]
+    points, normals : (N, 3) float64
+        Evaluation points [m] (off edges, see
+        :func:`~raytrad.core.formfactor.receiver_points`) and unit normals.
+    reflectance, emitted_exitance : (N, 3) float64
+        Of the surfaces the points lie on [1], [W m-2].
+    own : (N,) int or None
+        When the points are receivers of the mesh (new ones, whose ``radiosity`` is a
+        first guess): their indices. They see each other, so the gather is repeated
+        :data:`GATHER_PASSES` times, each reading what the last one gathered (from the
+        same factors, traced once).
+
+    Returns
+    -------
+    radiosity : (N, 3) float64 [W m-2]
+    hidden : (N,) bool
+    """
+    rows = engine.gather_rows(points, normals)
+    hidden = np.zeros(len(points), dtype=bool)
+    scale = np.ones(len(points))
+    if occluder is not None:
+        _, scene_normals = triangle_areas_normals(scene.triangle_vertices())
+        closed, hidden = occluder.probe_hemispheres(
+            points, normals, scene_normals, scene.double_sided
+        )
+        row_sum, limit = rows.row_sum, ROW_FIX_LIMIT
+        scale = np.where(closed & (np.abs(row_sum - 1.0) < limit) & (row_sum > 0), row_sum, 1.0)
+    radiosity = np.array(radiosity, dtype=np.float64)
+    for _ in range(1 if own is None else GATHER_PASSES):
+        irradiance = gathered_irradiance(rows, radiosity, patch_radiosity) / scale[:, None]
+        result = emitted_exitance + reflectance * irradiance
+        result[hidden] = emitted_exitance[hidden]
+        if own is not None:
+            radiosity[own] = result
+    return result, hidden
+
+
+def _gather(
+    scene: Scene,
+    mesh: RadiosityMesh,
+    engine: FormFactorEngine,
+    occluder: Occluder | None,
+    radiosity: np.ndarray,
+    patch_radiosity: np.ndarray,
+    new: np.ndarray,
+) -> tuple[RadiosityMesh, np.ndarray]:
+    """The new receivers' radiosity by a final gather; hidden ones marked in the mesh."""
+    points, _ = receiver_points(mesh, tol.ray_offset * engine.diagonal)
+    gathered, hidden = final_gather(
+        scene,
+        engine,
+        occluder,
+        radiosity,
+        patch_radiosity,
+        points[new],
+        mesh.receiver_normal[new],
+        mesh.receiver_reflectance[new],
+        mesh.receiver_emitted_exitance[new],
+        own=new,
+    )
+    visible = np.array(mesh.receiver_visible, dtype=bool)
+    visible[new] = ~hidden
+    mesh = replace(mesh, receiver_visible=visible, receiver_area=mesh.receiver_area * visible)
+    return mesh, gathered
+
+
+def patch_means(mesh: RadiosityMesh, radiosity: np.ndarray) -> np.ndarray:
+    """(P, 3) area-weighted mean radiosity of each patch's visible receivers (``W B``)."""
+    corner = mesh.triangle_receivers.reshape(-1)
+    weight = np.repeat(mesh.triangle_area / 3.0, 3) * (mesh.receiver_area[corner] > 0)
+    patch = np.repeat(mesh.triangle_patch, 3)
+    total = np.bincount(patch, weights=weight, minlength=mesh.patch_count)
+    out = np.stack(
+        [
+            np.bincount(patch, weights=weight * radiosity[corner, c], minlength=mesh.patch_count)
+            for c in range(3)
+        ],
+        axis=1,
+    )
+    return out / np.maximum(total, 1e-300)[:, None]
+
+
+def _interpolated(
+    mesh: RadiosityMesh,
+    radiosity: np.ndarray,
+    refined: RadiosityMesh,
+    parent: np.ndarray,
+    new: np.ndarray,
+) -> np.ndarray:
+    """(N, 3) radiosity the old mesh showed at the new receivers (linear interpolation
+    within the parent triangle)."""
+    owner = np.full(refined.receiver_count, -1)
+    owner[refined.triangle_receivers.reshape(-1)] = np.repeat(parent, 3)
+    tri = owner[new]
+    corners = mesh.positions[mesh.triangles[tri]]
+    point = refined.receiver_position[new]
+    e0, e1 = corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]
+    rel = point - corners[:, 0]
+    d00, d01, d11 = (np.einsum("ij,ij->i", a, b) for a, b in ((e0, e0), (e0, e1), (e1, e1)))
+    d20, d21 = np.einsum("ij,ij->i", rel, e0), np.einsum("ij,ij->i", rel, e1)
+    denom = d00 * d11 - d01 * d01
+    w1 = (d11 * d20 - d01 * d21) / denom
+    w2 = (d00 * d21 - d01 * d20) / denom
+    weights = np.stack([1 - w1 - w2, w1, w2], axis=1)
+    values = radiosity[mesh.triangle_receivers[tri]]
+    return np.asarray(np.einsum("nk,nkc->nc", weights, values))
+
+
+def _change_rms(
+    changes: list[tuple[np.ndarray, np.ndarray]], mesh: RadiosityMesh, radiosity: np.ndarray
+) -> np.ndarray:
+    """(3,) area-weighted RMS of the changes over all receivers, relative to the RMS
+    radiosity (a change on a few receivers is a small error of the whole)."""
+    area = mesh.receiver_area
+    norm = np.sqrt(area @ radiosity**2)
+    total = sum((a @ d**2 for d, a in changes), np.zeros(3))
+    return np.asarray(np.sqrt(total) / np.where(norm > 0, norm, 1.0))

@@ -1,0 +1,99 @@
+"""Balancing sampled form factors so that they conserve energy: Sinkhorn scaling of the
+receiver-by-patch matrix, ``F'_jp = r_j F_jp c_p`` (see
+:meth:`raytrad.core.formfactor.FormFactorEngine.balance` for the constraints)."""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+
+from raytrad.core.mesh import RadiosityMesh
+
+#: Most row-and-column rounds of :func:`sinkhorn`.
+BALANCE_ITERATIONS = 500
+#: Balancing stops when no column scale changes by more than this.
+BALANCE_CONVERGED = 1e-12
+
+
+class Sparse(NamedTuple):
+    """A receiver-by-patch matrix as coordinates: entry k is ``values[k]`` at row
+    ``rows[k]`` (receiver), column ``columns[k]`` (patch)."""
+
+    rows: np.ndarray
+    columns: np.ndarray
+    values: np.ndarray
+    row_count: int
+    column_count: int
+
+
+def sinkhorn(
+    factors: Sparse,
+    receiver_area: np.ndarray,
+    patch_area: np.ndarray,
+    fixed_rows: np.ndarray,
+    closed_columns: np.ndarray,
+    iterations: int = BALANCE_ITERATIONS,
+) -> tuple[np.ndarray, np.ndarray, int]:
+    """Row and column scales that hold the ``fixed_rows`` to a sum of 1, the
+    ``closed_columns`` to a capture of 1 and every other column to a capture of at most 1.
+
+    The capture of patch p is ``g_p = sum_j a_j F_jp / A_p``. Rows and columns are scaled
+    alternately until no column scale changes by more than :data:`BALANCE_CONVERGED`; the
+    rows are scaled last, so the fixed rows sum to 1 to rounding.
+
+    Parameters
+    ----------
+    factors : Sparse
+        F_jp, (R, P).
+    receiver_area : (K,) float64
+        ``a_j`` of each entry's receiver [m2].
+    patch_area : (P,) float64 [m2]
+    fixed_rows : (R,) bool
+    closed_columns : (P,) bool
+    iterations : int
+
+    Returns
+    -------
+    row_scale : (R,) float64
+    column_scale : (P,) float64
+    iterations : int, rounds taken
+    """
+    rows, owner, values = factors.rows, factors.columns, factors.values
+    total = factors.column_count
+    col_scale = np.ones(total)
+    done = 0
+    while done < iterations:
+        done += 1
+        row_scale = _row_scales(factors, values * col_scale[owner], fixed_rows)
+        weight = receiver_area * values * row_scale[rows]
+        capture = np.bincount(owner, weights=weight, minlength=total) / patch_area
+        new_col = np.ones(total)
+        np.divide(1.0, capture, out=new_col, where=(capture > 1.0) | closed_columns)
+        change = np.abs(new_col / col_scale - 1.0).max(initial=0.0)
+        col_scale = new_col
+        if change < BALANCE_CONVERGED:
+            break
+    return _row_scales(factors, values * col_scale[owner], fixed_rows), col_scale, done
+
+
+def _row_scales(factors: Sparse, values: np.ndarray, fix: np.ndarray) -> np.ndarray:
+    """(R,) scales that make the ``fix`` rows of ``values`` sum to 1 (1 elsewhere)."""
+    row_sum = np.bincount(factors.rows, weights=values, minlength=factors.row_count)
+    return np.where(fix & (row_sum > 0), 1.0 / np.maximum(row_sum, 1e-300), 1.0)
+
+
+def closed_patches(mesh: RadiosityMesh, closed: np.ndarray) -> np.ndarray:
+    """(P,) bool: patches all of whose visible receivers are ``closed``: their light has
+    nowhere to go but other surfaces."""
+    corner_patch = np.repeat(mesh.triangle_patch, 3)
+    corner = mesh.triangle_receivers.reshape(-1)
+    counts = mesh.receiver_area[corner] > 0  # hidden receivers do not shoot
+    open_corners = counts & ~closed[corner]
+    out = np.bincount(corner_patch, weights=open_corners, minlength=mesh.patch_count) == 0
+    return np.asarray(
+        out & (np.bincount(corner_patch, weights=counts, minlength=mesh.patch_count) > 0)
+    )
+
+
+__all__ = ["BALANCE_CONVERGED", "BALANCE_ITERATIONS", "Sparse", "closed_patches", "sinkhorn"]

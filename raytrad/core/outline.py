@@ -1,0 +1,97 @@
+"""The outline of each patch: its distinct vertices and its boundary edges, for the exact
+(contour-integral) unoccluded form factor of :mod:`raytrad.core.formfactor`."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from raytrad.constants import tol
+from raytrad.core.mesh import RadiosityMesh
+
+
+def group(labels: np.ndarray, count: int) -> tuple[np.ndarray, np.ndarray]:
+    """Items sorted by label, and CSR pointers ((count + 1,) int64) into them."""
+    order = np.argsort(labels, kind="stable")
+    return order, np.searchsorted(labels[order], np.arange(count + 1))
+
+
+def patch_vertices(mesh: RadiosityMesh) -> tuple[np.ndarray, np.ndarray]:
+    """The distinct vertices of each patch's triangles, grouped by patch (CSR)."""
+    key = np.unique(
+        np.stack([np.repeat(mesh.triangle_patch, 3), mesh.triangles.reshape(-1)], axis=1), axis=0
+    )
+    return key[:, 1], np.searchsorted(key[:, 0], np.arange(mesh.patch_count + 1))
+
+
+def boundary_edges(mesh: RadiosityMesh) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Oriented boundary edges of each patch: edges used by one of its triangles only.
+
+    Consecutive collinear boundary edges are merged (Lambert's sum is additive along a
+    straight edge), so a refined rectangular patch has 4 edges however fine its triangles.
+
+    Returns
+    -------
+    start, end : (E, 3) float64, edge endpoints [m], in the winding of their triangle
+    pointer : (P + 1,) int64, CSR pointers by patch
+    """
+    tri = mesh.triangles
+    a = tri.reshape(-1)
+    b = np.roll(tri, -1, axis=1).reshape(-1)
+    patch = np.repeat(mesh.triangle_patch, 3)
+    key = np.stack([patch, np.minimum(a, b), np.maximum(a, b)], axis=1)
+    _, inverse, counts = np.unique(key, axis=0, return_inverse=True, return_counts=True)
+    single = counts[inverse.reshape(-1)] == 1
+    order = np.argsort(patch[single], kind="stable")
+    a, b, patch = a[single][order], b[single][order], patch[single][order]
+    a, b, patch = _merge_collinear(mesh.positions, a, b, patch)
+    pointer = np.searchsorted(patch, np.arange(mesh.patch_count + 1))
+    return mesh.positions[a], mesh.positions[b], pointer
+
+
+def _merge_collinear(
+    positions: np.ndarray, a: np.ndarray, b: np.ndarray, patch: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Join boundary edges (a -> b) whose shared vertex is straight (collinear neighbours).
+
+    Only vertices with exactly one incoming and one outgoing boundary edge of the same
+    patch are candidates, so non-manifold boundaries are left as they are.
+    """
+    n = len(a)
+    start_key = patch * (positions.shape[0] + 1) + a
+    end_key = patch * (positions.shape[0] + 1) + b
+    sorted_start = np.argsort(start_key, kind="stable")
+    pos = np.searchsorted(start_key[sorted_start], end_key)
+    pos_c = np.minimum(pos, n - 1)
+    found = start_key[sorted_start[pos_c]] == end_key
+    # a vertex with two outgoing edges is ambiguous: no merging there
+    dup_start = np.zeros(n, dtype=bool)
+    ks = start_key[sorted_start]
+    twice = np.zeros(n, dtype=bool)
+    twice[1:] |= ks[1:] == ks[:-1]
+    twice[:-1] |= ks[1:] == ks[:-1]
+    dup_start[sorted_start] = twice
+    nxt = np.where(found, sorted_start[pos_c], -1)
+    ok = (nxt >= 0) & ~dup_start[np.maximum(nxt, 0)]
+    d0 = positions[b] - positions[a]
+    d1 = np.where(ok[:, None], d0[np.maximum(nxt, 0)], 0.0)
+    cross = np.linalg.norm(np.cross(d0, d1), axis=1)
+    scale = np.linalg.norm(d0, axis=1) * np.linalg.norm(d1, axis=1)
+    straight = ok & (cross <= tol.collinear * scale) & (np.einsum("ij,ij->i", d0, d1) > 0)
+    if not straight.any():
+        return a, b, patch
+    # the end of each edge's chain: follow straight joints (pointer jumping)
+    jump = np.where(straight, nxt, np.arange(n))
+    for _ in range(64):
+        jumped = jump[jump]
+        if np.array_equal(jumped, jump):
+            break
+        jump = jumped
+    removed_start = np.zeros(n, dtype=bool)
+    removed_start[nxt[straight]] = True
+    keep = ~removed_start
+    if not keep.any():  # a closed straight loop cannot happen for a real polygon
+        return a, b, patch
+    return a[keep], b[jump[keep]], patch[keep]
+
+
+__all__ = ["boundary_edges", "group", "patch_vertices"]

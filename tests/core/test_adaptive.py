@@ -1,0 +1,91 @@
+"""Adaptive refinement (raytrad.core.adaptive): conforming splits, budgets, and where it
+refines."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import numpy as np
+
+from raytrad.core.adaptive import RefineSettings, refine_adaptively, subdivide
+from raytrad.core.pipeline import Prepared
+from raytrad.core.solver import SolveResult, SolveSettings, solve
+
+
+def _open_edge_length(positions: np.ndarray, triangles: np.ndarray) -> float:
+    """Total length of the edges used by one triangle only [m]."""
+    edges = np.sort(triangles[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
+    unique, counts = np.unique(edges, axis=0, return_counts=True)
+    once = unique[counts == 1]
+    return float(np.linalg.norm(positions[once[:, 0]] - positions[once[:, 1]], axis=1).sum())
+
+
+def test_subdivision_is_conforming_and_keeps_receivers(
+    cornell_fine: tuple[Prepared, SolveResult],
+) -> None:
+    # A T-junction leaves a long edge on one side and two short ones on the other, all
+    # used once: the open edge length (the surfaces' outlines) would grow.
+    prepared, _ = cornell_fine
+    mesh = prepared.mesh
+    split = np.zeros(len(mesh.triangles), dtype=bool)
+    split[np.random.default_rng(0).choice(len(split), len(split) // 10, replace=False)] = True
+    refined, parent = subdivide(mesh, split)
+    assert refined.receiver_count > mesh.receiver_count
+    np.testing.assert_array_equal(
+        refined.receiver_position[: mesh.receiver_count], mesh.receiver_position
+    )
+    np.testing.assert_allclose(refined.triangle_area.sum(), mesh.triangle_area.sum(), rtol=1e-12)
+    np.testing.assert_allclose(
+        np.bincount(parent, weights=refined.triangle_area, minlength=len(mesh.triangles)),
+        mesh.triangle_area,
+        rtol=1e-9,
+    )
+    np.testing.assert_allclose(
+        _open_edge_length(refined.positions, refined.triangles),
+        _open_edge_length(mesh.positions, mesh.triangles),
+        rtol=1e-9,
+    )
+
+
+def test_uniform_light_needs_no_refinement(prepare_furnace: Callable[..., Prepared]) -> None:
+    prepared = prepare_furnace(0.5, 1.0)
+    result = solve(prepared.mesh, prepared.engine, SolveSettings())
+    out = refine_adaptively(
+        prepared.scene,
+        prepared.mesh,
+        prepared.engine,
+        prepared.occluder,
+        result.radiosity,
+        RefineSettings(),
+    )
+    assert out.added == 0 and out.mesh is prepared.mesh
+
+
+def test_refinement_goes_to_shadow_edges_within_budget(
+    cornell_fine: tuple[Prepared, SolveResult],
+) -> None:
+    prepared, result = cornell_fine
+    mesh = prepared.mesh
+    budget = mesh.receiver_count + 1500
+    out = refine_adaptively(
+        prepared.scene,
+        mesh,
+        prepared.engine,
+        prepared.occluder,
+        result.radiosity,
+        RefineSettings(max_receivers=budget),
+    )
+    assert 0 < out.added <= 1500 and out.mesh.receiver_count == mesh.receiver_count + out.added
+    assert sum(out.by_object.values()) <= out.added
+    assert np.isfinite(out.radiosity).all() and (out.radiosity >= 0).all()
+    # new receivers sit where the solve's radiosity changes fast: the floor around the
+    # blocks, not the middle of the back wall
+    new = out.mesh.receiver_position[mesh.receiver_count :]
+    floor = new[:, 1] < 1e-6
+    assert floor.mean() > 0.3
+    back_middle = (
+        (new[:, 2] > 0.558) & (np.abs(new[:, 0] - 0.28) < 0.1) & (np.abs(new[:, 1] - 0.27) < 0.1)
+    )
+    assert back_middle.mean() < 0.02
+    # the old receivers keep the solve's radiosity
+    np.testing.assert_array_equal(out.radiosity[: mesh.receiver_count], result.radiosity)

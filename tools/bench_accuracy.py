@@ -1,0 +1,322 @@
+"""Accuracy of a raytrad bake against an independent reference, point by point.
+
+The reference is raytrad's Monte Carlo path tracer (:mod:`raytrad.core.pathtrace`), which
+shares only the scene and Embree with the solver, at many paths per point. Points are
+drawn area-uniformly on every quad of the scene (the Cornell box's 16 surfaces), plus
+points at a few millimetres from every contact line (block sides against the floor). The
+bake's radiosity at each point is what a lightmap or image shows: the vertex radiosity
+interpolated over the refined triangle under the point.
+
+Prints, for each run: every surface's mean relative error (the same points on both
+sides, so the reference's noise averages out), the point-wise relative RMS, the share of
+points off by more than 10 %, and the contact-line errors. The reference is cached
+(``--cache``) since it takes minutes.
+
+    python tools/bench_accuracy.py                       # default settings and 5k receivers
+    python tools/bench_accuracy.py --receivers 20000 5000 --paths 40000
+"""
+
+from __future__ import annotations
+
+import argparse
+import hashlib
+import json
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT))
+
+from raytrad.core.mesh import MeshSettings  # noqa: E402
+from raytrad.core.pathtrace import path_traced_radiosity  # noqa: E402
+from raytrad.products.display import fill_hidden  # noqa: E402
+from raytrad.products.probe import radiosity_at  # noqa: E402
+from raytrad.scene import Scene, triangle_areas_normals  # noqa: E402
+from raytrad.scene.builtin import cornell_box  # noqa: E402
+from raytrad.settings import RefineSettings, RenderSettings  # noqa: E402
+
+#: Names of the Cornell box quads, in builder order.
+CORNELL_SURFACES = (
+    "floor",
+    "ceiling",
+    "back wall",
+    "green wall",
+    "red wall",
+    "light",
+    *(f"short block {side}" for side in ("top", "side 1", "side 2", "side 3", "side 4")),
+    *(f"tall block {side}" for side in ("top", "side 1", "side 2", "side 3", "side 4")),
+)
+#: Distances from a contact line of the contact points [m].
+CONTACT_DISTANCES = (0.002, 0.005, 0.01, 0.02)
+
+
+@dataclass
+class Probes:
+    """Reference points: position, normal, the quad they lie on, their kind."""
+
+    points: np.ndarray
+    normals: np.ndarray
+    quad: np.ndarray
+    contact: np.ndarray  # distance to a contact line [m], inf for area samples
+    shut: np.ndarray | None = None  # shut in (see shut_in), filled by main
+
+
+def quad_corners(scene: Scene) -> np.ndarray:
+    """(Q, 4, 3) corners of a scene built of quads (triangles 2q: 0-1-2 and 2q+1: 0-2-3)."""
+    tri = scene.triangle_vertices()
+    return np.concatenate([tri[0::2], tri[1::2][:, 2:3]], axis=1)
+
+
+def area_probes(scene: Scene, per_quad: int, rng: np.random.Generator) -> Probes:
+    """``per_quad`` area-uniform points on every quad (the light excluded)."""
+    corners = scene.triangle_vertices()
+    areas, normals = triangle_areas_normals(corners)
+    points, probe_normals, quads = [], [], []
+    for q in range(len(corners) // 2):
+        rows = np.array([2 * q, 2 * q + 1])
+        pick = rows[(rng.random(per_quad) * areas[rows].sum() > areas[rows[0]]).astype(int)]
+        u, v = rng.random(per_quad), rng.random(per_quad)
+        flip = u + v > 1
+        u, v = np.where(flip, 1 - u, u), np.where(flip, 1 - v, v)
+        c = corners[pick]
+        points.append(c[:, 0] + u[:, None] * (c[:, 1] - c[:, 0]) + v[:, None] * (c[:, 2] - c[:, 0]))
+        probe_normals.append(normals[pick])
+        quads.append(np.full(per_quad, q))
+    return Probes(
+        np.concatenate(points),
+        np.concatenate(probe_normals),
+        np.concatenate(quads),
+        np.full(per_quad * len(corners) // 2, np.inf),
+    )
+
+
+def contact_probes(scene: Scene, along: int) -> Probes:
+    """Points beside each block side's bottom edge: on the floor in front of it and on the
+    side above the floor, at :data:`CONTACT_DISTANCES`."""
+    quads = quad_corners(scene)
+    _, normals = triangle_areas_normals(scene.triangle_vertices()[0::2])
+    floor_normal = normals[0]
+    points, probe_normals, owner, distance = [], [], [], []
+    for q in range(len(quads)):
+        if abs(normals[q] @ floor_normal) > 1e-6 or q < 6:
+            continue  # not a vertical block side
+        bottom = quads[q][np.argsort(quads[q][:, 1])[:2]]
+        t = (np.arange(along) + 0.5) / along
+        line = bottom[0] + t[:, None] * (bottom[1] - bottom[0])
+        for d in CONTACT_DISTANCES:
+            points += [line + d * normals[q], line + d * floor_normal]
+            probe_normals += [np.tile(floor_normal, (along, 1)), np.tile(normals[q], (along, 1))]
+            owner += [np.zeros(along, int), np.full(along, q)]
+            distance += [np.full(along, d)] * 2
+    return Probes(
+        np.concatenate(points),
+        np.concatenate(probe_normals),
+        np.concatenate(owner),
+        np.concatenate(distance),
+    )
+
+
+def shut_in(scene: Scene, probes: Probes, rays: int = 256) -> np.ndarray:
+    """(N,) bool: probes most of whose hemisphere is the back of single-sided surfaces (the
+    ceiling in the gap behind the lamp). No one sees them; raytrad's error estimate skips
+    them too."""
+    from raytrad.core.pathtrace import cosine_directions
+    from raytrad.core.visibility import Occluder
+
+    _, normals = triangle_areas_normals(scene.triangle_vertices())
+    rng = np.random.default_rng(3)
+    out = np.zeros(len(probes.points), dtype=bool)
+    with Occluder(scene.positions, scene.triangles) as occluder:
+        for i, (x, n) in enumerate(zip(probes.points, probes.normals, strict=True)):
+            direction = cosine_directions(np.tile(n, (rays, 1)), rng)
+            origin = np.tile(occluder.to_local(x[None] + 1e-6 * n), (rays, 1))
+            hit, _ = occluder.intersect_local(origin, direction)
+            ok = hit >= 0
+            back = np.zeros(rays, dtype=bool)
+            back[ok] = (np.einsum("ij,ij->i", normals[hit[ok]], direction[ok]) > 0) & (
+                ~scene.double_sided[hit[ok]]
+            )
+            out[i] = back.mean() > 0.5
+    return out
+
+
+def reference(scene: Scene, probes: Probes, paths: int, cache: Path) -> np.ndarray:
+    """(N, 3) path-traced radiosity [W m-2] at the probes, cached by content."""
+    key = hashlib.sha256(
+        probes.points.tobytes() + probes.normals.tobytes() + str(paths).encode()
+    ).hexdigest()[:16]
+    path = cache / f"cornell-{key}.npz"
+    if path.exists():
+        return np.load(path)["radiosity"]
+    start = time.perf_counter()
+    irradiance, error = path_traced_radiosity(scene, probes.points, probes.normals, paths, seed=1)
+    quad_material = scene.material_index[0::2][probes.quad]
+    rho = scene.material_reflectance[quad_material]
+    emitted = scene.material_emitted_exitance[quad_material]
+    radiosity = emitted + rho * irradiance
+    cache.mkdir(parents=True, exist_ok=True)
+    np.savez(path, radiosity=radiosity, error=rho * error)
+    print(
+        f"reference: {len(probes.points)} points x {paths} paths in "
+        f"{time.perf_counter() - start:.0f} s -> {path}"
+    )
+    return radiosity
+
+
+def bake(scene: Scene, receivers: int, threshold: float | None = None) -> Baked:
+    """Solve, refine and estimate the error as ``raytrad render`` does, at ``receivers``."""
+    from raytrad import api
+    from raytrad.core.convergence import ConvergenceMonitor
+    from raytrad.core.solver import solve
+
+    refine = RefineSettings() if threshold is None else RefineSettings(threshold=threshold)
+    settings = RenderSettings(mesh=MeshSettings(receivers=receivers), refine=refine)
+    start = time.perf_counter()
+    prepared = api.prepare(scene, settings)
+    try:
+        monitor = ConvergenceMonitor(prepared.mesh, prepared.engine)
+        result = solve(prepared.mesh, prepared.engine, settings.solve, progress=monitor)
+        log = monitor.finish(result.state)
+        solved_receivers = prepared.mesh.receiver_count
+        baked, result, _ = api.refine(prepared, result, settings)
+        seconds = time.perf_counter() - start
+        error = api.estimate_error(prepared, baked, result, log)
+    finally:
+        prepared.close()
+    return Baked(
+        fill_hidden(baked.mesh, result.radiosity),
+        baked.mesh,
+        seconds,
+        time.perf_counter() - start - seconds,
+        solved_receivers,
+        error.total,
+        error,
+    )
+
+
+@dataclass
+class Baked:
+    """A bake: shown radiosity, its mesh, seconds to bake and to estimate the error,
+    receivers solved, the estimated total error (3,)."""
+
+    shown: np.ndarray
+    mesh: object
+    seconds: float
+    error_seconds: float
+    solved: int
+    total_rms: np.ndarray
+    parts: object = None
+
+
+def report(
+    name: str, got: np.ndarray, ref: np.ndarray, probes: Probes, quad_area: np.ndarray
+) -> dict[str, float]:
+    """Errors of ``got`` against ``ref`` at the probes (luminance-free: every channel).
+
+    ``point RMS`` is area-weighted (each area probe stands for its quad's area over the
+    quad's probe count), as ``report.json`` measures errors; ``point RMS, surfaces equal``
+    gives every quad the same weight (small block sides count as much as the floor).
+    """
+    # a probe nowhere on the mesh, or shut in (the floor under a block: every path starting
+    # there dies on the block's inside, so the reference is exactly 0), is seen by no one
+    on_mesh = ~np.isnan(got).any(axis=1) & (ref.sum(axis=1) > 0) & ~probes.shut
+    area = np.isinf(probes.contact) & on_mesh
+    got = np.where(on_mesh[:, None], got, 0.0)
+    lit = ref > 1e-3 * ref.max(axis=0)
+    means = {}
+    for q, surface in enumerate(CORNELL_SURFACES):
+        rows = area & (probes.quad == q)
+        if surface == "light" or not rows.any():
+            continue
+        means[surface] = float(np.abs(got[rows].mean(0) / ref[rows].mean(0) - 1).max())
+    worst = max(means, key=lambda s: means[s])
+    rel = np.where(lit, got / np.where(lit, ref, 1) - 1, 0.0)
+    shown = area & (probes.quad != CORNELL_SURFACES.index("light"))
+    rms = float(np.sqrt(((got - ref) ** 2)[shown].mean(0) / (ref**2)[shown].mean(0)).max())
+    count = np.bincount(probes.quad[shown], minlength=len(quad_area))
+    weight = np.where(shown, quad_area[probes.quad] / np.maximum(count[probes.quad], 1), 0.0)
+    weighted = float(np.sqrt((weight @ (got - ref) ** 2) / (weight @ ref**2)).max())
+    off = (np.abs(rel) > 0.1).any(axis=1)
+    out = {
+        "worst surface": means[worst],
+        "point RMS": weighted,
+        "point RMS, surfaces equal": rms,
+        "points > 10%": float((weight @ off) / weight.sum()),
+        "points > 10%, surfaces equal": float(off[shown].mean()),
+    }
+    for d in CONTACT_DISTANCES:
+        rows = (probes.contact == d) & on_mesh
+        out[f"contact {d * 1000:g} mm"] = float(
+            np.sqrt(((got - ref) ** 2)[rows].mean(0) / (ref**2)[rows].mean(0)).max()
+        )
+    print(f"\n{name}: worst surface {worst!r} {100 * means[worst]:+.2f} %")
+    for surface, error in means.items():
+        print(f"  {surface:18s} {100 * error:6.2f} %")
+    for k, v in out.items():
+        print(f"  {k:18s} {100 * v:6.2f} %")
+    return out
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--receivers", type=int, nargs="+", default=[20000, 5000])
+    parser.add_argument("--per-quad", type=int, default=64)
+    parser.add_argument("--along", type=int, default=8)
+    parser.add_argument("--paths", type=int, default=20000)
+    parser.add_argument(
+        "--refine-threshold",
+        type=float,
+        default=None,
+        help="adaptive refinement threshold (default: raytrad's; 0: off)",
+    )
+    parser.add_argument("--cache", type=Path, default=ROOT / ".cache" / "accuracy")
+    parser.add_argument("--json", type=Path, default=None, help="also write the table here")
+    args = parser.parse_args(argv)
+    scene = cornell_box()
+    rng = np.random.default_rng(7)
+    area = area_probes(scene, args.per_quad, rng)
+    contact = contact_probes(scene, args.along)
+    probes = Probes(
+        *(
+            np.concatenate([a, b])
+            for a, b in zip(
+                (area.points, area.normals, area.quad, area.contact),
+                (contact.points, contact.normals, contact.quad, contact.contact),
+                strict=True,
+            )
+        )
+    )
+    ref = reference(scene, probes, args.paths, args.cache)
+    probes.shut = shut_in(scene, probes)
+    triangle_area = triangle_areas_normals(scene.triangle_vertices())[0]
+    quad_area = triangle_area[0::2] + triangle_area[1::2]
+    rows = {}
+    for receivers in args.receivers:
+        baked = bake(scene, receivers, args.refine_threshold)
+        got = radiosity_at(baked.mesh, baked.shown, probes.points, probes.normals)
+        name = (
+            f"{baked.solved} receivers solved, {baked.mesh.receiver_count} baked, "
+            f"{baked.seconds:.1f} s (+{baked.error_seconds:.1f} s error estimate)"
+        )
+        rows[name] = report(name, got, ref, probes, quad_area)
+        rows[name]["estimated total"] = float(baked.total_rms.max())
+        rows[name]["estimate / true"] = float(baked.total_rms.max()) / rows[name]["point RMS"]
+        parts = baked.parts
+        print(
+            f"  estimated total    {100 * baked.total_rms.max():6.2f} %  "
+            f"({rows[name]['estimate / true']:.2f} x the true point RMS; algebraic "
+            f"{100 * parts.algebraic.max():.2f} %, discretisation "
+            f"{100 * parts.discretisation.max():.2f} %, conservation "
+            f"{100 * parts.conservation.max():.2g} %)"
+        )
+    if args.json:
+        args.json.write_text(json.dumps(rows, indent=2))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
