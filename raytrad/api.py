@@ -45,7 +45,7 @@ from raytrad.outputs.comparison import markdown_table, write_comparison
 from raytrad.outputs.plot import plot_convergence
 from raytrad.outputs.report import add_error_log, add_total_error, build_report, write_report
 from raytrad.outputs.resume import checkpoint_path, fingerprint, load_state, save_state
-from raytrad.outputs.write import write_outputs
+from raytrad.outputs.write import check_output_range, write_outputs
 from raytrad.products.framing import file_camera
 from raytrad.products.lightmap import choose_lightmap_uvs
 from raytrad.scene import Scene, has_emission
@@ -262,6 +262,7 @@ def render(
         with timed(timings, "solve"):
             result = solve(prepared.mesh, prepared.engine, settings.solve, state, on_shot, stop)
         error_log = monitor.finish(result.state)
+        check_output_range(result.radiosity, scene_path)
         solved = prepared
         with timed(timings, "refine"):
             baked, result, refinement = refine(prepared, result, settings)

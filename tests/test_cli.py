@@ -178,6 +178,20 @@ def test_scene_without_emitter_warns_and_writes_zeros(
     assert report["solve"]["stop_reason"] == "no-emission"
 
 
+def test_radiosity_beyond_float32_is_refused_before_writing(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # Ke 1e200 solves in float64 (B ~ 1e200) but the PLY and EXR are float32: inf there.
+    scene = tmp_path / "hot.obj"
+    scene.write_text("mtllib hot.mtl\n" + TRIANGLE + "v 1 1 0\nusemtl m\nf 1 2 3\nf 2 4 3\n")
+    (tmp_path / "hot.mtl").write_text("newmtl m\nKd 0.5 0.5 0.5\nKe 1e200 1e200 1e200\n")
+    out = tmp_path / "out"
+    status, _, err = run_cli(["render", str(scene), "-o", str(out), *SMALL], capsys)
+    assert status == 1
+    assert "hot.obj" in err and "float32" in err
+    assert not out.exists() or not any(out.iterdir())
+
+
 def test_interrupted_render_resumes_to_the_same_answer(tmp_path: Path) -> None:
     write_obj(cornell_box(), tmp_path / "cornell.obj")  # occluders: rays and sample points
     scene = tmp_path / "cornell.obj"

@@ -187,11 +187,13 @@ def _to_split(
     room: int,
 ) -> np.ndarray:
     """(T,) bool: the triangles to split this round, worst first within ``room`` receivers."""
-    if room <= 0:
-        return np.zeros(len(mesh.triangles), dtype=bool)
     luminance = radiosity @ _LUMINANCE
     visible = mesh.receiver_area > 0
+    if room <= 0 or not visible.any():
+        return np.zeros(len(mesh.triangles), dtype=bool)
     level = float(np.average(luminance[visible], weights=mesh.receiver_area[visible]))
+    if not level > 0.0:  # nothing lit (no emitter): nothing changes fast
+        return np.zeros(len(mesh.triangles), dtype=bool)
     corner = luminance[mesh.triangle_receivers]
     corner_seen = visible[mesh.triangle_receivers]
     spread = np.ptp(corner, axis=1) / np.maximum(corner.mean(axis=1), settings.floor * level)

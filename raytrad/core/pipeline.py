@@ -35,6 +35,7 @@ from raytrad.core.mesh import MeshSettings, RadiosityMesh, build_mesh, hide_rece
 from raytrad.core.repair import repair_scene
 from raytrad.core.solver import SolveResult, check_solvable, filled_capture
 from raytrad.core.visibility import Occluder, nothing_can_occlude
+from raytrad.errors import SolverError
 from raytrad.scene import Scene, triangle_areas_normals
 
 log = logging.getLogger(__name__)
@@ -179,6 +180,11 @@ def refine_solution(
     )
     if not refinement.added:
         return prepared, result, refinement
+    if not np.isfinite(refinement.radiosity).all():
+        raise SolverError(
+            "refinement gathered non-finite radiosity: the scene's emission or reflectance "
+            "overflows double precision"
+        )
     baked = dataclasses.replace(prepared, mesh=refinement.mesh)
     return baked, dataclasses.replace(result, radiosity=refinement.radiosity), refinement
 

@@ -13,6 +13,7 @@ import numpy as np
 from raytrad.constants import defaults
 from raytrad.core.pipeline import Prepared
 from raytrad.core.solver import SolveResult
+from raytrad.errors import SolverError
 from raytrad.formats.images import write_exr, write_png
 from raytrad.formats.ply import write_radiosity_ply
 from raytrad.outputs.gltf import baked_parts, write_baked_glb
@@ -113,3 +114,13 @@ def _write_image(
     )
     write_png(outputs["image_preview"], display_encode(radiance * exposure, image.tonemap))
     return {**dataclasses.asdict(view), "name": origin}
+
+
+def check_output_range(radiosity: np.ndarray, scene_path: Path) -> None:
+    """Refuse, before anything is written, a radiosity the float32 outputs cannot hold."""
+    peak = float(np.abs(radiosity).max(initial=0.0))
+    if not peak < float(np.finfo(np.float32).max) / 1e3:
+        raise SolverError(
+            f"{scene_path}: radiosity reaches {peak:.3g} W m-2, beyond the float32 range of "
+            "the outputs (lower the emission or use --scale)"
+        )
