@@ -31,7 +31,7 @@ from raytrad.core.accuracy import ErrorParts
 from raytrad.core.adaptive import Refinement
 from raytrad.core.compare import MethodRun, run_method
 from raytrad.core.convergence import ConvergenceMonitor, ErrorLog, Reference, ResidualTrend
-from raytrad.core.pipeline import Prepared, timed
+from raytrad.core.pipeline import Prepared, RunBudget, timed
 from raytrad.core.reference import (
     analytic_furnace,
     automatic_reference,
@@ -56,6 +56,7 @@ log = logging.getLogger(__name__)
 
 #: How a stopped solve ends; a run that ends so leaves a checkpoint to resume from.
 RESUMABLE = ("interrupted", "time-limit", "max-shots")
+StopPoll = Callable[[], bool] | None
 
 
 @dataclass(frozen=True)
@@ -115,10 +116,13 @@ def load(path: str | os.PathLike[str], settings: RenderSettings | None = None) -
     return SceneFile(scene, loaded.cameras, loaded.output, loaded.kind)
 
 
-def prepare(scene: Scene, settings: RenderSettings | None = None) -> Prepared:
-    """Repair, mesh and balance ``scene`` (:func:`raytrad.core.pipeline.prepare`)."""
+def prepare(
+    scene: Scene, settings: RenderSettings | None = None, stop: StopPoll = None
+) -> Prepared:
+    """Repair, mesh and balance ``scene`` (:func:`raytrad.core.pipeline.prepare`; ``stop``
+    cuts the form-factor pass short)."""
     settings = settings or RenderSettings()
-    return pipeline.prepare(scene, settings.mesh, settings.cache_mb)
+    return pipeline.prepare(scene, settings.mesh, settings.cache_mb, stop)
 
 
 def solve_scene(
@@ -136,12 +140,12 @@ def solve_scene(
 
 
 def refine(
-    prepared: Prepared, result: SolveResult, settings: RenderSettings
+    prepared: Prepared, result: SolveResult, settings: RenderSettings, stop: StopPoll = None
 ) -> tuple[Prepared, SolveResult, Refinement]:
     """Adaptive refinement of a solve: the refined mesh (in a copy of ``prepared``), its
     radiosity (in a copy of ``result``) and what was done
-    (:func:`raytrad.core.pipeline.refine_solution`)."""
-    return pipeline.refine_solution(prepared, result, settings.refine)
+    (:func:`raytrad.core.pipeline.refine_solution`; ``stop`` ends it between rounds)."""
+    return pipeline.refine_solution(prepared, result, settings.refine, stop)
 
 
 def estimate_error(
@@ -236,9 +240,11 @@ def render(
     """
     scene_path, output_dir = Path(scene_path), Path(output_dir)
     timings: dict[str, float] = {}
+    start = time.perf_counter()
     with timed(timings, "load"):
         loaded = load(scene_path, settings)
     settings = with_scene_defaults(settings or RenderSettings(), loaded.output)
+    budget = RunBudget(settings.solve.time_limit, stop, start)  # bounds the whole run
     camera = None
     if settings.image is not None:
         camera = file_camera(loaded.cameras, settings.image.view, scene_path, loaded.kind)
@@ -250,7 +256,7 @@ def render(
     if resume and checkpoint.exists():
         state = load_state(checkpoint, key)
         log.info("resuming from %s at shot %d", checkpoint, state.shots)
-    prepared = prepare(loaded.scene, settings)
+    prepared = prepare(loaded.scene, settings, budget)
     timings.update(prepared.timings)
     try:
         ref = None
@@ -260,12 +266,13 @@ def render(
         monitor = ConvergenceMonitor(prepared.mesh, prepared.engine, ref)
         on_shot = _shot_hook(monitor, progress, settings, checkpoint, key)
         with timed(timings, "solve"):
-            result = solve(prepared.mesh, prepared.engine, settings.solve, state, on_shot, stop)
+            solve_settings = budget.solve_settings(settings.solve, state.seconds if state else 0)
+            result = solve(prepared.mesh, prepared.engine, solve_settings, state, on_shot, stop)
         error_log = monitor.finish(result.state)
         check_output_range(result.radiosity, scene_path)
         solved = prepared
         with timed(timings, "refine"):
-            baked, result, refinement = refine(prepared, result, settings)
+            baked, result, refinement = refine(prepared, result, settings, budget)
         with timed(timings, "error"):
             error = estimate_error(solved, baked, result, error_log)
         with timed(timings, "write"):

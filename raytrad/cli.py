@@ -267,7 +267,8 @@ def _add_common(parser: argparse.ArgumentParser, default_tolerance: float) -> No
         type=float,
         default=None,
         metavar="SECONDS",
-        help="stop solving after this many seconds",
+        help="bound the whole run (form factors, solve, refinement) to about this many "
+        "seconds; every emitter still shoots once",
     )
     add("--max-shots", type=int, default=None, metavar="N", help="stop after N shots")
     add(

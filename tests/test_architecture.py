@@ -33,6 +33,7 @@ LAYERS = (
 #: Each heavy dependency and the one module allowed to import it (inside a function).
 ADAPTERS = {
     "embreex": "raytrad.core.visibility",
+    "numba": "raytrad.core.compiled",
     "trimesh": "raytrad.scenefiles.trimesh_adapter",
     "OpenImageIO": "raytrad.formats.images",
     "colour": "raytrad.scene.colorimetry",

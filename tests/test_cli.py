@@ -202,8 +202,14 @@ def test_interrupted_render_resumes_to_the_same_answer(tmp_path: Path) -> None:
     assert straight.result.stop_reason == "converged"
 
     out = tmp_path / "resumed"
-    polls = itertools.count()
-    first = api.render(scene, out, settings, stop=lambda: next(polls) >= 20)
+    shots: list[int] = []  # Ctrl-C after the 20th shot (the pass polls it too)
+    first = api.render(
+        scene,
+        out,
+        settings,
+        progress=lambda report: shots.append(report.shots),
+        stop=lambda: len(shots) >= 20,
+    )
     checkpoint = out / "cornell.checkpoint.npz"
     assert first.result.stop_reason == "interrupted"
     assert first.result.state.shots == 20
@@ -217,6 +223,24 @@ def test_interrupted_render_resumes_to_the_same_answer(tmp_path: Path) -> None:
     assert not checkpoint.exists()
     _, _, written = read_radiosity_ply(out / "cornell.ply")
     np.testing.assert_array_equal(written, straight.result.radiosity.astype(np.float32))
+
+
+def test_a_stop_in_the_form_factor_pass_saves_and_resumes(tmp_path: Path) -> None:
+    scene = SCENES / "cornell-box.obj"
+    settings = RenderSettings(
+        mesh=MeshSettings(receivers=800, patches=60), solve=SolveSettings(tolerance=1e-4)
+    )
+    straight = api.render(scene, tmp_path / "straight", settings)
+    out = tmp_path / "stopped"
+    polls = itertools.count()  # Ctrl-C after the 5th form-factor column
+    first = api.render(scene, out, settings, stop=lambda: next(polls) >= 5)
+    assert first.result.stop_reason == "interrupted" and first.result.state.shots == 0
+    report = json.loads((out / "report.json").read_text())
+    assert report["statistics"]["form_factor_balance"]["complete"] is False
+    assert (out / "cornell-box.checkpoint.npz").is_file() and (out / "cornell-box.ply").is_file()
+    second = api.render(scene, out, settings, resume=True)
+    assert second.result.stop_reason == "converged"
+    np.testing.assert_allclose(second.result.radiosity, straight.result.radiosity, rtol=1e-9)
 
 
 def test_resume_refuses_a_checkpoint_of_other_settings(

@@ -1,7 +1,8 @@
 """Benchmark of the solver methods: ``raytrad compare`` on the bundled scenes.
 
 For the Cornell box, the furnace at reflectance 0.9 and the open shadow scene, every method
-runs on the same receivers from scratch (its own form factors); the table gives seconds and
+runs on the same receivers through one shared form-factor pass, whose seconds count in
+each method's times; the table gives seconds and
 shots to 1e-2 and 1e-3 true error (relative RMS against a dense solve of the same system),
 and the ratio of ambient's shots to 1e-3 to plain progressive refinement's, measured in
 the same run.

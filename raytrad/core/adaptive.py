@@ -19,6 +19,7 @@ differs from the interpolation it replaces measures the discretisation error the
 from __future__ import annotations
 
 import logging
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -114,6 +115,7 @@ def refine_adaptively(
     occluder: Occluder | None,
     radiosity: np.ndarray,
     settings: RefineSettings,
+    stop: Callable[[], bool] | None = None,
 ) -> Refinement:
     """Refine ``mesh`` where ``radiosity`` changes fast and gather the new receivers.
 
@@ -129,6 +131,8 @@ def refine_adaptively(
     radiosity : (R, 3) float64
         The solution at ``mesh``'s receivers [W m-2].
     settings : RefineSettings
+    stop : callable or None
+        Polled before each round (a time budget spent): True ends refinement there.
     """
     budget = settings.max_receivers or 2 * mesh.receiver_count
     out = Refinement(mesh, np.asarray(radiosity, dtype=np.float64))
@@ -138,6 +142,9 @@ def refine_adaptively(
     smallest = settings.smallest * engine.diagonal
     changes: list[tuple[np.ndarray, np.ndarray]] = []
     for _ in range(settings.rounds):
+        if stop is not None and stop():
+            log.info("refinement stopped after %d rounds: the time limit is spent", out.rounds)
+            break
         room = budget - out.mesh.receiver_count
         split = _to_split(out.mesh, out.radiosity, settings, smallest, room)
         if not split.any():

@@ -21,9 +21,10 @@ from __future__ import annotations
 import itertools
 import logging
 import threading
-from collections.abc import Callable
+from collections.abc import Callable, Generator, Iterable
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
+from typing import TypeVar
 
 import numpy as np
 
@@ -31,41 +32,44 @@ from raytrad.constants import scene_diagonal, tol
 from raytrad.core.balance import BALANCE_ITERATIONS, Sparse, closed_patches, sinkhorn
 from raytrad.core.gather import (
     EMPTY,
-    GATHER_RADII,
     GatherRows,
-    GatherShares,
     GatherWeights,
     gathered_irradiance,
     join_gathers,
 )
-from raytrad.core.kernels import (
-    contour_form_factor,
-    disk_form_factor,
-    linear_corner_shares,
-    polygon_form_factor,
-    visible_centroid,
-)
 from raytrad.core.mesh import RadiosityMesh
-from raytrad.core.outline import boundary_edges, group, patch_vertices
+from raytrad.core.pairs import PairFactors
 from raytrad.core.visibility import Occluder, worker_count
 
 log = logging.getLogger(__name__)
+_T = TypeVar("_T")
 
-#: A sub-area nearer than this multiple of its bounding-box diagonal has its visibility
-#: sampled triangle by triangle, weighted by exact factors.
-NEAR_FACTOR = 2.0
-#: A near triangle closer than this many of its sizes to a receiver spreads its gather
-#: weight over its corners by what the receiver sees of each part of it
-#: (:func:`~raytrad.core.kernels.linear_corner_shares`, split 3 times within one size,
-#: twice beyond), not equally.
-SHARE_SIZES = 3.0
-#: Receiver-sample pairs per work chunk (bounds memory whatever the receiver count).
-PAIRS_PER_CHUNK = 1 << 15
 #: Largest relative miss of a closed receiver's row sum that balancing treats as sampling
 #: error; beyond it the row is a modelling problem and left alone.
 ROW_FIX_LIMIT = 0.25
 #: Row sums of an occlusion-free scene within this of 1 count as closed (exact factors).
 EXACT_ROW_SUM = 1e-6
+
+
+#: What :meth:`FormFactorEngine.balance` reports when the pass was cut short.
+_UNBALANCED: dict[str, float | bool] = {
+    "closed_rows": 0,
+    "closed_columns": 0,
+    "capped_columns": 0,
+    "row_error": 0.0,
+    "capture_excess": 0.0,
+    "column_excess": 0.0,
+    "iterations": 0,
+}
+
+
+class _Worker(threading.local):
+    """Set in a thread computing one patch: its chunks then run in that thread."""
+
+    active = False
+
+
+_WORKER = _Worker()
 
 
 # --------------------------------------------------------------------------------------
@@ -137,20 +141,7 @@ class FormFactorEngine:
         diag = scene_diagonal(mesh.positions)
         self.diagonal = diag
         self._points, self._origins = receiver_points(mesh, tol.ray_offset * diag)
-        order = np.lexsort((np.arange(len(mesh.triangle_subarea)), mesh.triangle_subarea))
-        self._sub_tri = order
-        self._sub_ptr = np.searchsorted(
-            mesh.triangle_subarea[order], np.arange(mesh.subarea_count + 1)
-        )
-        self._tri_corners = mesh.positions[mesh.triangles]
-        # Ray targets sit tol.ray_offset off their surface on its lit side: a ray ending a
-        # margin short of a point *on* the surface would, at grazing angles, end closer to
-        # the surface than float32 resolves, and hit the very surface it aims at.
-        self._sub_target = mesh.subarea_point + tol.ray_offset * diag * mesh.subarea_normal
-        self._patch_tri, self._patch_tri_ptr = group(mesh.triangle_patch, mesh.patch_count)
-        self._vert_index, self._vert_ptr = patch_vertices(mesh)
-        self._edge_start, self._edge_end, self._edge_ptr = boundary_edges(mesh)
-        self._shares = GatherShares(mesh, self._sub_tri, self._sub_ptr)
+        self._pairs = PairFactors(mesh, occluder, diag)
         self._gathers: dict[int, GatherWeights] = {}  # kept even when columns are not
 
     def close(self) -> None:
@@ -183,7 +174,10 @@ class FormFactorEngine:
         cached = self._cache.get(patch)
         if cached is not None:
             return cached
-        col = self._compute(patch)
+        return self._store(patch, self._compute(patch))
+
+    def _store(self, patch: int, col: Column) -> Column:
+        """Count, sum and (while it fits) cache a newly computed column."""
         self.columns_computed += 1
         self.rays_cast += col.rays
         if len(col.gather.receivers):
@@ -199,12 +193,50 @@ class FormFactorEngine:
             self._cached_bytes += size
         return col
 
+    def raw_columns(self, patches: Iterable[int]) -> Generator[tuple[int, Column], None, None]:
+        """(patch, column before balancing) for ``patches`` in order, the missing ones
+        computed a patch per thread on every core."""
+        patches = list(patches)
+        todo = [p for p in patches if p not in self._cache]
+        done = self._per_patch(self._compute, todo)
+        try:
+            for patch in patches:
+                cached = self._cache.get(patch)
+                yield patch, cached if cached is not None else self._store(patch, next(done))
+        finally:
+            done.close()
+
+    def _per_patch(
+        self, work: Callable[[int], _T], patches: list[int]
+    ) -> Generator[_T, None, None]:
+        """``work(patch)`` for each patch, in order, on every core; each patch's chunks
+        then run in its own thread."""
+        if worker_count() == 1 or len(patches) < 2:
+            yield from map(work, patches)
+            return
+
+        def task(patch: int) -> _T:
+            _WORKER.active = True
+            try:
+                return work(patch)
+            finally:
+                _WORKER.active = False
+
+        yield from self._executor().map(task, patches)
+
+    def _executor(self) -> ThreadPoolExecutor:
+        with self._lock:
+            if self._pool is None:
+                self._pool = ThreadPoolExecutor(worker_count(), thread_name_prefix="raytrad-ff")
+            return self._pool
+
     def balance(
         self,
         closed: np.ndarray | None,
         progress: Callable[[int, int], None] | None = None,
         iterations: int = BALANCE_ITERATIONS,
-    ) -> dict[str, float]:
+        stop: Callable[[], bool] | None = None,
+    ) -> dict[str, float | bool]:
         """Rescale the form factors so that they conserve energy exactly.
 
         Two physical constraints the sampled vertex-to-patch factors miss:
@@ -234,21 +266,58 @@ class FormFactorEngine:
             ``progress(done, total)`` while columns are computed.
         iterations : int
             Most row-and-column rounds.
+        stop : callable or None
+            Polled after each column (a time budget spent, Ctrl-C): True ends the pass
+            early. The columns are computed emitters first, then by the power a patch can
+            reflect (area x reflectance), so that a shortened pass has the ones the first
+            shots need; the rest are computed when a shot needs them, and nothing is
+            balanced (``complete`` is False).
 
         Returns
         -------
         dict with ``closed_rows`` (rows held to 1), ``closed_columns`` (patches held to
         g = 1), ``capped_columns`` (other patches scaled down to g = 1), ``row_error`` and
         ``capture_excess`` (largest deviations before balancing), ``column_excess``
-        (largest g - 1 after it) and ``iterations``.
+        (largest g - 1 after it), ``iterations`` and ``complete`` (every column computed
+        and balanced).
         """
         mesh = self.mesh
         total = mesh.patch_count
-        columns = []
-        for patch in range(total):
-            columns.append(self._raw_column(patch))
+        columns: list[Column | None] = [None] * total
+        computed = self.raw_columns(self._pass_order())
+        for done, (patch, col) in enumerate(computed, start=1):
+            columns[patch] = col
             if progress is not None:
-                progress(patch + 1, total)
+                progress(done, total)
+            if done < total and stop is not None and stop():
+                computed.close()  # cancels the columns not started
+                log.warning(
+                    "form-factor pass stopped after %d of %d columns: the rest are computed "
+                    "as shots need them, and the factors are not balanced",
+                    done,
+                    total,
+                )
+                return _UNBALANCED | {"complete": False}
+        return self._balance([c for c in columns if c is not None], closed, iterations)
+
+    def _pass_order(self) -> np.ndarray:
+        """Patches by the order the form-factor pass computes them: emitters first, then
+        by area x mean reflectance (what a shortened pass should have)."""
+        m = self.mesh
+        emits = np.zeros(m.patch_count, dtype=bool)
+        np.logical_or.at(
+            emits,
+            m.triangle_patch,
+            (m.receiver_emitted_exitance[m.triangle_receivers] > 0).any(axis=(1, 2)),
+        )
+        power = m.patch_area * m.patch_reflectance.mean(axis=1)
+        return np.lexsort((np.arange(m.patch_count), -power, ~emits))
+
+    def _balance(
+        self, columns: list[Column], closed: np.ndarray | None, iterations: int
+    ) -> dict[str, float | bool]:
+        mesh = self.mesh
+        total = mesh.patch_count
         sums = self._row_sum.copy()
         if closed is None:
             closed = np.abs(sums - 1.0) < EXACT_ROW_SUM
@@ -283,6 +352,7 @@ class FormFactorEngine:
             "capture_excess": float(max(0.0, capture0.max(initial=0.0) - 1.0)),
             "column_excess": float(max(0.0, capture.max(initial=0.0) - 1.0)),
             "iterations": done,
+            "complete": True,
         }
 
     def row_sums(self) -> np.ndarray:
@@ -372,9 +442,15 @@ class FormFactorEngine:
         normals = np.asarray(normals, dtype=np.float64).reshape(-1, 3)
         origins = points + tol.ray_offset * self.diagonal * normals
         rows = GatherRows(len(points), np.zeros(len(points)), [])
-        for patch in range(self.mesh.patch_count):
+
+        def work(patch: int) -> tuple[np.ndarray, tuple[np.ndarray, int, GatherWeights]]:
             near = self._candidates(patch, points, normals)
-            factors, rays, gather = self._factors(points[near], normals[near], origins[near], patch)
+            return near, self._factors(points[near], normals[near], origins[near], patch)
+
+        patches = list(range(self.mesh.patch_count))
+        for patch, (near, (factors, rays, gather)) in zip(
+            patches, self._per_patch(work, patches), strict=True
+        ):
             self.rays_cast += rays
             factors = factors * self._col_scale[patch]
             rows.row_sum[near] += factors
@@ -407,223 +483,23 @@ class FormFactorEngine:
     ) -> tuple[np.ndarray, int, GatherWeights]:
         if len(x) == 0:
             return np.zeros(0), 0, EMPTY
-        n_sub = max(1, self.mesh.patch_subareas(patch).stop - self.mesh.patch_subareas(patch).start)
-        per_chunk = max(1, PAIRS_PER_CHUNK // max(n_sub, self._edge_count(patch)))
+        per_chunk = self._pairs.chunk_size(patch)
         bounds = [*range(0, len(x), per_chunk), len(x)]
         spans = list(itertools.pairwise(bounds))
 
         def work(span: tuple[int, int]) -> tuple[np.ndarray, int, GatherWeights]:
             a, b = span
-            return self._chunk(x[a:b], nx[a:b], origins[a:b], patch)
+            return self._pairs.chunk(x[a:b], nx[a:b], origins[a:b], patch)
 
-        if len(spans) == 1 or worker_count() == 1:
+        if len(spans) == 1 or worker_count() == 1 or _WORKER.active:
             parts = [work(s) for s in spans]
         else:
-            if self._pool is None:
-                self._pool = ThreadPoolExecutor(worker_count(), thread_name_prefix="raytrad-ff")
-            parts = list(self._pool.map(work, spans))
+            parts = list(self._executor().map(work, spans))
         return (
             np.concatenate([p[0] for p in parts]),
             sum(p[1] for p in parts),
             join_gathers([p[2] for p in parts], [a for a, _ in spans]),
         )
-
-    def _edge_count(self, patch: int) -> int:
-        return int(self._edge_ptr[patch + 1] - self._edge_ptr[patch])
-
-    def _chunk(
-        self, x: np.ndarray, nx: np.ndarray, origins: np.ndarray, patch: int
-    ) -> tuple[np.ndarray, int, GatherWeights]:
-        """F(receiver <- patch) for receivers (x, nx) whose rays start at ``origins``, the
-        rays cast, and the gather weights of the near receivers (chunk indices).
-
-        The unoccluded factor is exact (:meth:`_unoccluded`); visibility scales it by the
-        visible fraction of the patch seen through its sub-area sample points, each weighted
-        by its disk-approximation factor, or, for sub-areas nearer than
-        :data:`NEAR_FACTOR` sizes, through each of their triangles weighted exactly. Where
-        nothing can occlude, samples are taken only for the near receivers' gather weights.
-        """
-        m = self.mesh
-        unoccluded = self._unoccluded(x, nx, patch)
-        sees = unoccluded > 0
-        distance = np.linalg.norm(x - m.patch_center[patch], axis=1)
-        close = sees & (distance < GATHER_RADII * m.patch_radius[patch])
-        if self.occluder is None:
-            if not close.any():
-                return unoccluded, 0, EMPTY
-            sees = close
-        sub = m.patch_subareas(patch)
-        weight, far_c, far_s, near_c, near_tri, near_target, near_w, near_share = self._samples(
-            x, nx, sees, sub
-        )
-        who = np.concatenate([far_c, near_c])
-        blocked = np.zeros(len(who), dtype=bool)
-        factors = unoccluded
-        if self.occluder is not None:
-            targets = np.concatenate([self._sub_target[sub][far_s], near_target])
-            blocked = self._blocked(origins[who], targets)
-            total = weight.sum(axis=1) + np.bincount(near_c, weights=near_w, minlength=len(x))
-            hidden = np.bincount(
-                who,
-                weights=np.concatenate([weight[far_c, far_s], near_w]) * blocked,
-                minlength=len(x),
-            )
-            visible = np.where(total > 0, 1.0 - hidden / np.where(total > 0, total, 1.0), 0.0)
-            factors = unoccluded * np.clip(visible, 0.0, 1.0)
-        seen = ~blocked
-        far_seen, near_seen = seen[: len(far_c)], seen[len(far_c) :]
-        pair = np.cumsum(close) - 1
-        f, n = close[far_c] & far_seen, close[near_c] & near_seen
-        pointer, sources, shares = self._shares.spread(
-            pair[far_c[f]],
-            far_s[f] + sub.start,
-            weight[far_c[f], far_s[f]],
-            pair[near_c[n]],
-            near_tri[n],
-            near_w[n],
-            near_share[n],
-            int(close.sum()),
-        )
-        near = np.flatnonzero(close)
-        gather = GatherWeights(near, factors[near], pointer, sources, shares)
-        keep = np.diff(pointer) > 0  # a near receiver that sees none of the patch gathers nothing
-        return factors, len(who) if self.occluder is not None else 0, gather.subset(keep)
-
-    def _samples(
-        self, x: np.ndarray, nx: np.ndarray, sees: np.ndarray, sub: slice
-    ) -> tuple[np.ndarray, ...]:
-        """The weighted visibility samples of the receivers that see the patch.
-
-        Returns
-        -------
-        weight : (C, S) float64, disk factors of far samples (0 elsewhere)
-        far_c, far_s : (A,) int64, chunk receiver and patch-local sub-area of far samples
-        near_c, near_tri, near_target, near_w, near_share : (B,), (B,), (B, 3), (B,),
-            (B, 3), chunk receiver, triangle, ray target [m], exact factor and corner
-            shares of near triangles
-        """
-        m = self.mesh
-        y = m.subarea_point[sub]
-        d = y[None, :, :] - x[:, None, :]
-        r2 = np.einsum("csj,csj->cs", d, d)
-        r = np.sqrt(r2)
-        inv_r = 1.0 / np.where(r > 0, r, 1.0)
-        cos_r = np.einsum("csj,cj->cs", d, nx) * inv_r
-        cos_s = -np.einsum("csj,sj->cs", d, m.subarea_normal[sub]) * inv_r
-        near = r < NEAR_FACTOR * m.subarea_size[sub][None, :]
-        far = ~near & (cos_r > 0) & (cos_s > 0)
-        # a receiver that sees part of the patch but none of its sample points is handled
-        # triangle by triangle
-        near |= (sees & ~far.any(axis=1) & ~near.any(axis=1))[:, None]
-        near &= sees[:, None]
-        far &= sees[:, None]
-        weight = np.where(far, disk_form_factor(cos_r, cos_s, r2, m.subarea_area[sub]), 0.0)
-        far_c, far_s = np.nonzero(far)
-        near_c, near_tri, near_target, near_w, near_share = self._near_field(x, nx, near, sub)
-        return weight, far_c, far_s, near_c, near_tri, near_target, near_w, near_share
-
-    def _unoccluded(self, x: np.ndarray, nx: np.ndarray, patch: int) -> np.ndarray:
-        """Exact unoccluded F(receiver <- patch).
-
-        Where a planar patch lies wholly above the receiver's horizon, Lambert's formula is
-        a sum over the patch's boundary edges alone (interior edges cancel); otherwise each
-        triangle facing the receiver is clipped to the horizon and summed.
-        """
-        m = self.mesh
-        lo, hi = self._vert_ptr[patch], self._vert_ptr[patch + 1]
-        verts = m.positions[self._vert_index[lo:hi]]
-        height = verts @ nx.T - np.einsum("cj,cj->c", x, nx)[None, :]  # (Vp, C)
-        band = tol.horizon * self.diagonal
-        top = height.max(axis=0)
-        # The boundary-contour sum is exact only for a planar patch: seen from a receiver
-        # on a folded patch (a warped quad's two triangles) it would count the fold's own
-        # surface as a full hemisphere. Folded patches go triangle by triangle.
-        above = (height.min(axis=0) >= -band) & (top > band) & bool(m.patch_planar[patch])
-        if m.patch_planar[patch]:  # nothing reaches the back of a one-sided patch
-            facing = (x - m.patch_center[patch]) @ m.patch_normal[patch] > band
-            above &= facing
-            top = np.where(facing, top, -np.inf)
-        out = np.zeros(len(x))
-        if above.any():
-            a, b = self._edge_ptr[patch], self._edge_ptr[patch + 1]
-            out[above] = contour_form_factor(
-                self._edge_start[a:b], self._edge_end[a:b], x[above], nx[above]
-            )
-        straddle = ~above & (top > band)
-        if straddle.any():
-            c = np.nonzero(straddle)[0]
-            ta, tb = self._patch_tri_ptr[patch], self._patch_tri_ptr[patch + 1]
-            tris = self._patch_tri[ta:tb]
-            cc = np.repeat(c, len(tris))
-            tt = np.tile(tris, len(c))
-            f = self._triangle_factors(x[cc], nx[cc], tt)
-            out += np.bincount(cc, weights=f, minlength=len(x))
-        return out
-
-    def _triangle_factors(self, x: np.ndarray, nx: np.ndarray, tri: np.ndarray) -> np.ndarray:
-        """Exact clipped factors to triangles whose lit side faces the receiver, else 0."""
-        corners = self._tri_corners[tri]
-        in_front = (
-            np.einsum("kj,kj->k", x - corners[:, 0], self.mesh.triangle_normal[tri])
-            > tol.horizon * self.diagonal
-        )
-        f = np.zeros(len(tri))
-        if in_front.any():
-            f[in_front] = polygon_form_factor(corners[in_front], x[in_front], nx[in_front])
-        return f
-
-    def _near_field(
-        self, x: np.ndarray, nx: np.ndarray, near: np.ndarray, sub: slice
-    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """Exact per-triangle visibility weights for near (receiver, sub-area) pairs.
-
-        Returns
-        -------
-        chunk_receiver : (K,) int64, index into the chunk
-        triangle : (K,) int64
-        target : (K, 3) float64, ray target: the centroid of the part of the triangle above
-            the receiver's horizon, lifted off the surface [m]
-        weight : (K,) float64, unoccluded exact factors (> 0 only)
-        shares : (K, 3) float64, each corner's share of what the receiver sees of the
-            triangle (:func:`~raytrad.core.kernels.linear_corner_shares` within
-            :data:`SHARE_SIZES` triangle sizes, else 1/3)
-        """
-        c, s = np.nonzero(near)
-        if len(c) == 0:
-            empty = np.zeros(0, np.int64)
-            return empty, empty, np.zeros((0, 3)), np.zeros(0), np.zeros((0, 3))
-        s_global = s + sub.start
-        start, stop = self._sub_ptr[s_global], self._sub_ptr[s_global + 1]
-        counts = stop - start
-        pair = np.repeat(np.arange(len(c)), counts)
-        offset = np.arange(len(pair)) - np.repeat(np.cumsum(counts) - counts, counts)
-        tri = self._sub_tri[np.repeat(start, counts) + offset]
-        cc = c[pair]
-        f = self._triangle_factors(x[cc], nx[cc], tri)
-        keep = f > 0
-        cc, tri = cc[keep], tri[keep]
-        corners = self._tri_corners[tri]
-        target = visible_centroid(corners, x[cc], nx[cc])
-        target += tol.ray_offset * self.diagonal * self.mesh.triangle_normal[tri]
-        # within a few of its sizes a receiver sees mostly the near part of a triangle
-        shares = np.full((len(tri), 3), 1.0 / 3.0)
-        size = np.linalg.norm(corners - np.roll(corners, 1, axis=1), axis=2).max(axis=1)
-        distance = np.linalg.norm(corners.mean(axis=1) - x[cc], axis=1) / size
-        for levels, lo, hi in ((3, 0.0, 1.0), (2, 1.0, SHARE_SIZES)):
-            part = (distance >= lo) & (distance < hi)
-            if part.any():
-                shares[part] = linear_corner_shares(
-                    corners[part], x[cc[part]], nx[cc[part]], levels
-                )
-        return cc, tri, target, f[keep], shares
-
-    def _blocked(self, origins: np.ndarray, targets: np.ndarray) -> np.ndarray:
-        assert self.occluder is not None
-        delta = targets - origins
-        length = np.linalg.norm(delta, axis=1)
-        direction = delta / np.where(length > 0, length, 1.0)[:, None]
-        reach = np.maximum(length - 0.5 * tol.ray_offset * self.diagonal, 0.0)
-        return self.occluder.occluded_local(self.occluder.to_local(origins), direction, reach)
 
 
 def receiver_points(mesh: RadiosityMesh, offset: float) -> tuple[np.ndarray, np.ndarray]:

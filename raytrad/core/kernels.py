@@ -1,4 +1,4 @@
-"""Form-factor kernels: closed-form point-to-area factors, numpy-vectorised over pairs.
+"""Form-factor kernels: closed-form point-to-area factors, vectorised over pairs.
 
 * :func:`disk_form_factor`: the Wallace et al. (1989) disk approximation of a
   differential-to-area factor;
@@ -12,15 +12,25 @@ crosses the receiver's plane, so a corner at +-1e-17 m gives the same factor eit
 Choosing a ray *target* is not continuous (the centroid of the whole triangle or of its
 clipped part), so :func:`visible_centroid` counts heights within ``tol.horizon`` of the
 pair's size as on the horizon (:func:`horizon_heights`).
+
+:func:`polygon_form_factor`, :func:`contour_form_factor` and
+:func:`linear_corner_shares` run compiled (:mod:`raytrad.core.compiled`, numba) when it
+is available; their ``numpy_`` twins here are the reference the tests compare them with.
 """
 
 from __future__ import annotations
 
+import functools
 import math
 
 import numpy as np
 
 from raytrad.constants import tol
+from raytrad.core import compiled
+
+
+def _f64(array: np.ndarray) -> np.ndarray:
+    return np.ascontiguousarray(array, dtype=np.float64)
 
 
 def disk_form_factor(
@@ -114,6 +124,17 @@ def clip_to_horizon(
 def polygon_form_factor(
     polygons: np.ndarray, points: np.ndarray, normals: np.ndarray
 ) -> np.ndarray:
+    """Exact unoccluded point-to-polygon form factor, compiled when available (see
+    :func:`numpy_polygon_form_factor`, the reference, for the formula and shapes)."""
+    fast = compiled.get()
+    if fast is None:
+        return numpy_polygon_form_factor(polygons, points, normals)
+    return fast.polygon_form_factor(_f64(polygons), _f64(points), _f64(normals))
+
+
+def numpy_polygon_form_factor(
+    polygons: np.ndarray, points: np.ndarray, normals: np.ndarray
+) -> np.ndarray:
     """Exact unoccluded point-to-polygon form factor (Lambert's formula).
 
     ``F = |sum_k gamma_k n . (u_k x u_k+1) / |u_k x u_k+1|| / (2 pi)`` with u_k the unit
@@ -145,9 +166,10 @@ def polygon_form_factor(
     return out
 
 
+@functools.lru_cache(maxsize=8)
 def _sub_triangles(levels: int) -> tuple[np.ndarray, np.ndarray]:
     """Barycentric corners (4^levels, 3, 3) and centroids (4^levels, 3) of the midpoint
-    subdivision of a triangle, ``levels`` times."""
+    subdivision of a triangle, ``levels`` times (cached, read-only)."""
     tris = np.eye(3)[None, :, :]
     for _ in range(levels):
         a, b, c = tris[:, 0], tris[:, 1], tris[:, 2]
@@ -155,10 +177,27 @@ def _sub_triangles(levels: int) -> tuple[np.ndarray, np.ndarray]:
         tris = np.concatenate(
             [np.stack(t, axis=1) for t in ((a, ab, ca), (ab, b, bc), (ca, bc, c), (ab, bc, ca))]
         )
-    return tris, tris.mean(axis=1)
+    centroids = tris.mean(axis=1)
+    tris.flags.writeable = False
+    centroids.flags.writeable = False
+    return tris, centroids
 
 
 def linear_corner_shares(
+    triangles: np.ndarray, points: np.ndarray, normals: np.ndarray, levels: int = 2
+) -> np.ndarray:
+    """Corner shares, compiled when available (see :func:`numpy_linear_corner_shares`, the
+    reference, for the method and shapes)."""
+    fast = compiled.get()
+    if fast is None:
+        return numpy_linear_corner_shares(triangles, points, normals, levels)
+    corners, centroids = _sub_triangles(levels)
+    return fast.linear_corner_shares(
+        _f64(triangles), _f64(points), _f64(normals), corners, centroids
+    )
+
+
+def numpy_linear_corner_shares(
     triangles: np.ndarray, points: np.ndarray, normals: np.ndarray, levels: int = 2
 ) -> np.ndarray:
     """(N, 3) share of each corner in what a receiver sees of a linearly varying triangle.
@@ -186,7 +225,7 @@ def linear_corner_shares(
     corners, centroids = _sub_triangles(levels)
     count = len(corners)
     parts = np.einsum("skc,ncj->nskj", corners, triangles).reshape(-1, 3, 3)
-    factor = polygon_form_factor(
+    factor = numpy_polygon_form_factor(
         parts, np.repeat(points, count, axis=0), np.repeat(normals, count, axis=0)
     ).reshape(-1, count)
     total = factor.sum(axis=1)
@@ -247,6 +286,17 @@ def edge_sum(u: np.ndarray, v: np.ndarray, normals: np.ndarray) -> np.ndarray:
 def contour_form_factor(
     start: np.ndarray, end: np.ndarray, points: np.ndarray, normals: np.ndarray
 ) -> np.ndarray:
+    """Lambert's formula over a boundary contour, compiled when available (see
+    :func:`numpy_contour_form_factor`, the reference)."""
+    fast = compiled.get()
+    if fast is None:
+        return numpy_contour_form_factor(start, end, points, normals)
+    return fast.contour_form_factor(_f64(start), _f64(end), _f64(points), _f64(normals))
+
+
+def numpy_contour_form_factor(
+    start: np.ndarray, end: np.ndarray, points: np.ndarray, normals: np.ndarray
+) -> np.ndarray:
     """Lambert's formula summed over the boundary edges of a surface.
 
     Parameters
@@ -264,4 +314,161 @@ def contour_form_factor(
     """
     return edge_sum(
         start[None, :, :] - points[:, None, :], end[None, :, :] - points[:, None, :], normals
+    )
+
+
+def facing_triangle_sums(
+    points: np.ndarray,
+    normals: np.ndarray,
+    corners: np.ndarray,
+    triangle_normals: np.ndarray,
+    margin: float,
+) -> np.ndarray:
+    """Exact unoccluded factor from each receiver to a set of triangles, compiled when
+    available (see :func:`numpy_facing_triangle_sums`, the reference)."""
+    fast = compiled.get()
+    if fast is None:
+        return numpy_facing_triangle_sums(points, normals, corners, triangle_normals, margin)
+    return fast.facing_triangle_sums(
+        _f64(points), _f64(normals), _f64(corners), _f64(triangle_normals), float(margin)
+    )
+
+
+def numpy_facing_triangle_sums(
+    points: np.ndarray,
+    normals: np.ndarray,
+    corners: np.ndarray,
+    triangle_normals: np.ndarray,
+    margin: float,
+) -> np.ndarray:
+    """Sum over triangles of the exact horizon-clipped factor from each receiver.
+
+    A triangle counts only where its lit side faces the receiver by more than ``margin``
+    (a one-sided triangle seen from behind gives nothing).
+
+    Parameters
+    ----------
+    points, normals : (C, 3) float64
+        Receiver positions [m] and unit normals.
+    corners : (T, 3, 3) float64
+        Triangle corners [m].
+    triangle_normals : (T, 3) float64
+        Their unit normals (lit side).
+    margin : float
+        Height in front of a triangle's plane below which it is not seen [m].
+
+    Returns
+    -------
+    (C,) float64 form factors [1].
+    """
+    c, t = len(points), len(corners)
+    rc = np.repeat(np.arange(c), t)
+    rt = np.tile(np.arange(t), c)
+    x, nx, tri = points[rc], normals[rc], corners[rt]
+    in_front = np.einsum("kj,kj->k", x - tri[:, 0], triangle_normals[rt]) > margin
+    f = np.zeros(len(rc))
+    if in_front.any():
+        f[in_front] = numpy_polygon_form_factor(tri[in_front], x[in_front], nx[in_front])
+    return np.bincount(rc, weights=f, minlength=c)
+
+
+def sample_weights(
+    points: np.ndarray,
+    normals: np.ndarray,
+    samples: np.ndarray,
+    sample_normals: np.ndarray,
+    near_reach: np.ndarray,
+    area: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Disk weights of far sample pairs and the near mask, compiled when available (see
+    :func:`numpy_sample_weights`, the reference)."""
+    fast = compiled.get()
+    if fast is None:
+        return numpy_sample_weights(points, normals, samples, sample_normals, near_reach, area)
+    return fast.sample_weights(
+        _f64(points),
+        _f64(normals),
+        _f64(samples),
+        _f64(sample_normals),
+        _f64(near_reach),
+        _f64(area),
+    )
+
+
+def numpy_sample_weights(
+    points: np.ndarray,
+    normals: np.ndarray,
+    samples: np.ndarray,
+    sample_normals: np.ndarray,
+    near_reach: np.ndarray,
+    area: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Every (receiver, sub-area sample) pair: far and facing, or near.
+
+    Parameters
+    ----------
+    points, normals : (C, 3) float64
+        Receiver positions [m] and unit normals.
+    samples, sample_normals : (S, 3) float64
+        Sub-area sample points [m] and unit normals.
+    near_reach : (S,) float64
+        A receiver nearer than this to a sample is near it [m].
+    area : (S,) float64
+        Sub-areas [m2].
+
+    Returns
+    -------
+    weight : (C, S) float64, :func:`disk_form_factor` of far pairs, 0 elsewhere [1]
+    far : (C, S) bool, not near, and each in front of the other
+    near : (C, S) bool
+    """
+    d = samples[None, :, :] - points[:, None, :]
+    r2 = np.einsum("csj,csj->cs", d, d)
+    r = np.sqrt(r2)
+    inv_r = 1.0 / np.where(r > 0, r, 1.0)
+    cos_r = np.einsum("csj,cj->cs", d, normals) * inv_r
+    cos_s = -np.einsum("csj,sj->cs", d, sample_normals) * inv_r
+    near = r < near_reach[None, :]
+    far = ~near & (cos_r > 0) & (cos_s > 0)
+    weight = np.where(far, disk_form_factor(cos_r, cos_s, r2, area[None, :]), 0.0)
+    return weight, far, near
+
+
+def segment_rays(
+    origins: np.ndarray, targets: np.ndarray, shift: np.ndarray, shorten: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Rays along segments, compiled when available (see :func:`numpy_segment_rays`, the
+    reference)."""
+    fast = compiled.get()
+    if fast is None:
+        return numpy_segment_rays(origins, targets, shift, shorten)
+    return fast.segment_rays(_f64(origins), _f64(targets), _f64(shift), float(shorten))
+
+
+def numpy_segment_rays(
+    origins: np.ndarray, targets: np.ndarray, shift: np.ndarray, shorten: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Rays from ``origins`` towards ``targets`` for an occlusion query.
+
+    Parameters
+    ----------
+    origins, targets : (N, 3) float64
+        Segment ends [m].
+    shift : (3,) float64
+        Subtracted from the origins (to the ray tracer's local frame) [m].
+    shorten : float
+        The segment stops this short of its target [m].
+
+    Returns
+    -------
+    origin : (N, 3) float32 [m], direction : (N, 3) float32 (unit), reach : (N,) float32 [m]
+    """
+    delta = targets - origins
+    length = np.sqrt(np.einsum("ij,ij->i", delta, delta))
+    direction = delta / np.where(length > 0, length, 1.0)[:, None]
+    reach = np.maximum(length - shorten, 0.0)
+    return (
+        (origins - shift).astype(np.float32),
+        direction.astype(np.float32),
+        reach.astype(np.float32),
     )

@@ -14,7 +14,7 @@ from __future__ import annotations
 import dataclasses
 import logging
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from typing import Any
@@ -33,12 +33,15 @@ from raytrad.core.convergence import counted_receivers
 from raytrad.core.formfactor import FormFactorEngine, receiver_points
 from raytrad.core.mesh import MeshSettings, RadiosityMesh, build_mesh, hide_receivers
 from raytrad.core.repair import repair_scene
-from raytrad.core.solver import SolveResult, check_solvable, filled_capture
+from raytrad.core.solver import SolveResult, SolveSettings, check_solvable, filled_capture
 from raytrad.core.visibility import Occluder, nothing_can_occlude
 from raytrad.errors import SolverError
 from raytrad.scene import Scene, triangle_areas_normals
 
 log = logging.getLogger(__name__)
+
+#: Seconds between the form-factor pass's progress lines.
+PASS_LOG_SECONDS = 10.0
 
 
 @dataclass
@@ -103,6 +106,7 @@ def prepare(
     scene: Scene,
     mesh_settings: MeshSettings | None = None,
     cache_mb: float = defaults.cache_mb,
+    stop: Callable[[], bool] | None = None,
 ) -> Prepared:
     """Repair, mesh and balance ``scene``: everything before the first shot.
 
@@ -116,6 +120,9 @@ def prepare(
     mesh_settings : MeshSettings
     cache_mb : float
         Memory for cached form-factor columns [MiB].
+    stop : callable or None
+        Polled during the form-factor pass (a time budget, Ctrl-C): True cuts it short
+        (see :meth:`FormFactorEngine.balance`).
 
     Raises
     ------
@@ -144,20 +151,79 @@ def prepare(
             )
             mesh = hide_receivers(mesh, hidden)
         engine = FormFactorEngine(mesh, occluder, cache_bytes=int(cache_mb * (1 << 20)))
-        balance = engine.balance(closed)
-    log.info(
-        "form factors: %d closed rows held to 1 (largest miss %.2e), %d patches held to "
-        "capture 1 (largest excess %.2e)",
-        balance["closed_rows"],
-        balance["row_error"],
-        balance["capped_columns"],
-        balance["capture_excess"],
-    )
+        balance = engine.balance(closed, _pass_progress(), stop=stop)
+    if balance["complete"]:
+        log.info(
+            "form factors: %d closed rows held to 1 (largest miss %.2e), %d patches held to "
+            "capture 1 (largest excess %.2e)",
+            balance["closed_rows"],
+            balance["row_error"],
+            balance["capped_columns"],
+            balance["capture_excess"],
+        )
     return Prepared(scene, mesh, engine, occluder, timings, closed, balance)
 
 
+@dataclass
+class RunBudget:
+    """The whole run's time limit (``--time-limit``), polled by every stage: the
+    form-factor pass, the solve and refinement. Calling it says whether to stop now: the
+    time is spent, or ``stop`` (Ctrl-C) asks.
+
+    Attributes
+    ----------
+    seconds : float or None
+        The budget from ``start`` [s]; None: no limit.
+    stop : callable or None
+        Another stop request, polled too.
+    start : float
+        ``time.perf_counter()`` when the run began [s].
+    """
+
+    seconds: float | None
+    stop: Callable[[], bool] | None = None
+    start: float = field(default_factory=time.perf_counter)
+
+    def __call__(self) -> bool:
+        spent = self.seconds is not None and time.perf_counter() - self.start >= self.seconds
+        return spent or (self.stop is not None and self.stop())
+
+    def solve_settings(self, settings: SolveSettings, resumed_seconds: float) -> SolveSettings:
+        """``settings`` with the solve's time limit set to what is left of the budget (the
+        solver counts a resumed state's seconds too)."""
+        if self.seconds is None:
+            return settings
+        left = self.seconds - (time.perf_counter() - self.start)
+        return dataclasses.replace(settings, time_limit=resumed_seconds + max(left, 1e-6))
+
+
+def _pass_progress() -> Callable[[int, int], None]:
+    """Logs the form-factor pass's progress and time left every :data:`PASS_LOG_SECONDS`
+    (a log line, so that it shows in CI logs and batch runs, not only on a terminal)."""
+    start = last = time.perf_counter()
+
+    def report(done: int, total: int) -> None:
+        nonlocal last
+        now = time.perf_counter()
+        if now - last >= PASS_LOG_SECONDS and done < total:
+            last = now
+            left = (now - start) / done * (total - done)
+            log.info(
+                "form factors: %d of %d columns in %.0f s, about %.0f s left",
+                done,
+                total,
+                now - start,
+                left,
+            )
+
+    return report
+
+
 def refine_solution(
-    prepared: Prepared, result: SolveResult, settings: RefineSettings
+    prepared: Prepared,
+    result: SolveResult,
+    settings: RefineSettings,
+    stop: Callable[[], bool] | None = None,
 ) -> tuple[Prepared, SolveResult, Refinement]:
     """Adaptive refinement of a solve (:mod:`raytrad.core.adaptive`).
 
@@ -177,6 +243,7 @@ def refine_solution(
         prepared.occluder,
         result.radiosity,
         settings,
+        stop,
     )
     if not refinement.added:
         return prepared, result, refinement

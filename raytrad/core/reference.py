@@ -16,7 +16,8 @@ from raytrad.core.convergence import Reference
 from raytrad.core.formfactor import FormFactorEngine
 from raytrad.core.gather import near_field_irradiance
 from raytrad.core.mesh import RadiosityMesh
-from raytrad.core.solver import SolveSettings, patch_average_matrix, solve
+from raytrad.core.solver import SolveSettings, solve
+from raytrad.core.system import patch_average_matrix
 from raytrad.errors import SceneError
 from raytrad.scene import triangle_areas_normals
 

@@ -42,6 +42,7 @@ import numpy as np
 
 from raytrad.core.formfactor import Column, FormFactorEngine
 from raytrad.core.mesh import RadiosityMesh
+from raytrad.core.system import DiscreteSystem
 from raytrad.errors import SettingsError, SolverError
 
 log = logging.getLogger(__name__)
@@ -58,7 +59,8 @@ class SolveSettings:
     tolerance : float
         Stop when the unshot power is below this fraction of the emitted power [1].
     time_limit : float or None
-        Stop after this many seconds of solving [s].
+        Stop after this many seconds of solving, once every emitter has shot (direct
+        light is never cut short) [s].
     max_shots : int or None
         Stop after this many shots.
     omega : float
@@ -219,18 +221,18 @@ class SolveResult:
 # Shooting amounts: one function per method (the registry)
 # --------------------------------------------------------------------------------------
 
-ShootAmount = Callable[["_Problem", SolverState, SolveSettings], np.ndarray]
+ShootAmount = Callable[["DiscreteSystem", SolverState, SolveSettings], np.ndarray]
 
 
 def _progressive_amount(
-    problem: _Problem, state: SolverState, settings: SolveSettings
+    problem: DiscreteSystem, state: SolverState, settings: SolveSettings
 ) -> np.ndarray:
     """plain progressive refinement (Cohen et al. 1988)"""
     return state.unshot
 
 
 def _overrelaxation_amount(
-    problem: _Problem, state: SolverState, settings: SolveSettings
+    problem: DiscreteSystem, state: SolverState, settings: SolveSettings
 ) -> np.ndarray:
     """progressive refinement shooting omega times the unshot radiosity"""
     return settings.omega * state.unshot
@@ -246,7 +248,9 @@ def filled_capture(captured: np.ndarray, patch_area: np.ndarray) -> np.ndarray:
     return np.where(known, captured, mean_capture)
 
 
-def _ambient_amount(problem: _Problem, state: SolverState, settings: SolveSettings) -> np.ndarray:
+def _ambient_amount(
+    problem: DiscreteSystem, state: SolverState, settings: SolveSettings
+) -> np.ndarray:
     """ambient overshooting (Feda 1992), the default and usually fastest
 
     Formulas 3-5, with the measured capture fraction in the amplification.
@@ -299,100 +303,9 @@ SHOOTING_METHODS: dict[str, ShootingMethod] = {
 # --------------------------------------------------------------------------------------
 
 
-@dataclass(frozen=True)
-class _Problem:
-    """Static arrays of the discrete system."""
-
-    patch_area: np.ndarray  # (P,)
-    patch_reflectance: np.ndarray  # (P, 3)
-    receiver_area: np.ndarray  # (R,)
-    receiver_reflectance: np.ndarray  # (R, 3)
-    receiver_emission: np.ndarray  # (R, 3)
-    receiver_ptr: np.ndarray  # (R + 1,) CSR rows of W^T
-    entry_patch: np.ndarray  # (nnz,)
-    entry_weight: np.ndarray  # (nnz,) W[patch, receiver]
-    entry_receiver: np.ndarray  # (nnz,)
-    patch_entries: np.ndarray  # (nnz,) entries grouped by patch
-    patch_ptr: np.ndarray  # (P + 1,) CSR pointers into patch_entries
-    scratch: np.ndarray  # (R, 3) zeros, a work array of _shoot
-
-    @classmethod
-    def from_mesh(cls, mesh: RadiosityMesh) -> _Problem:
-        tri_patch = np.repeat(mesh.triangle_patch, 3)
-        receiver = mesh.triangle_receivers.reshape(-1)
-        weight = np.repeat(mesh.triangle_area / 3.0, 3) / mesh.patch_area[tri_patch]
-        if mesh.receiver_visible is not None:  # hidden receivers do not count
-            weight = weight * mesh.receiver_visible[receiver]
-        # merge duplicate (receiver, patch) entries
-        key = receiver * mesh.patch_count + tri_patch
-        uniq, inverse = np.unique(key, return_inverse=True)
-        w = np.bincount(inverse.reshape(-1), weights=weight)
-        r = uniq // mesh.patch_count
-        ptr = np.searchsorted(r, np.arange(mesh.receiver_count + 1))
-        entry_patch = uniq % mesh.patch_count
-        by_patch = np.argsort(entry_patch, kind="stable")
-        return cls(
-            patch_area=mesh.patch_area,
-            patch_reflectance=mesh.patch_reflectance,
-            receiver_area=mesh.receiver_area,
-            receiver_reflectance=mesh.receiver_reflectance,
-            receiver_emission=mesh.receiver_emitted_exitance,
-            receiver_ptr=ptr,
-            entry_patch=entry_patch,
-            entry_weight=w,
-            entry_receiver=r,
-            patch_entries=by_patch,
-            patch_ptr=np.searchsorted(entry_patch[by_patch], np.arange(mesh.patch_count + 1)),
-            scratch=np.zeros((mesh.receiver_count, 3)),
-        )
-
-    def spread(self, state: SolverState) -> np.ndarray:
-        """(P, 3) ``sum_k W_pk |dB_pk - dB_p|`` of ``state`` (see :class:`SolverState`);
-        also sets ``state.peak``."""
-        k = self.entry_receiver
-        own = (
-            self.receiver_emission[k]
-            + self.receiver_reflectance[k] * state.irradiance[k]
-            - state.entry_shot
-        )
-        deviation = self.entry_weight[:, None] * np.abs(own - state.unshot[self.entry_patch])
-        count = len(self.patch_area)
-        peak = np.zeros((count, 3))
-        np.maximum.at(peak, self.entry_patch, np.abs(own))
-        state.peak = peak
-        return np.stack(
-            [np.bincount(self.entry_patch, deviation[:, c], minlength=count) for c in range(3)],
-            axis=1,
-        )
-
-    def average(self, receivers: np.ndarray, values: np.ndarray) -> np.ndarray:
-        """``W[:, receivers] @ values``: patch means of per-receiver values ((K, 3) -> (P, 3))."""
-        start, stop = self.receiver_ptr[receivers], self.receiver_ptr[receivers + 1]
-        counts = stop - start
-        rows = np.repeat(np.arange(len(receivers)), counts)
-        entries = np.repeat(start, counts) + (
-            np.arange(len(rows)) - np.repeat(np.cumsum(counts) - counts, counts)
-        )
-        p = self.entry_patch[entries]
-        w = self.entry_weight[entries]
-        out = np.empty((len(self.patch_area), 3))
-        for c in range(3):
-            out[:, c] = np.bincount(p, weights=w * values[rows, c], minlength=len(self.patch_area))
-        return out
-
-
-def patch_average_matrix(mesh: RadiosityMesh) -> np.ndarray:
-    """(P, R) float64 dense W: patch radiosity as the area-weighted mean of its receivers."""
-    problem = _Problem.from_mesh(mesh)
-    matrix = np.zeros((mesh.patch_count, mesh.receiver_count))
-    rows = np.repeat(np.arange(mesh.receiver_count), np.diff(problem.receiver_ptr))
-    matrix[problem.entry_patch, rows] = problem.entry_weight
-    return matrix
-
-
-def new_state(mesh: RadiosityMesh, problem: _Problem | None = None) -> SolverState:
+def new_state(mesh: RadiosityMesh, problem: DiscreteSystem | None = None) -> SolverState:
     """The state before any shot: patches hold their emission as unshot radiosity."""
-    problem = problem or _Problem.from_mesh(mesh)
+    problem = problem or DiscreteSystem.from_mesh(mesh)
     everyone = np.arange(mesh.receiver_count)
     return SolverState(
         irradiance=np.zeros((mesh.receiver_count, 3)),
@@ -451,22 +364,25 @@ def solve(
     """
     settings = settings or SolveSettings()
     check_solvable(mesh)
-    problem = _Problem.from_mesh(mesh)
+    problem = DiscreteSystem.from_mesh(mesh)
     state = state or new_state(mesh, problem)
     if state.entry_shot.shape != (len(problem.entry_patch), 3):
         raise SolverError("the state to resume was made for another mesh")
     amount_of = SHOOTING_METHODS[settings.method].amount
     area = problem.patch_area
-    emitted = area @ problem.average(np.arange(mesh.receiver_count), problem.receiver_emission)
+    everyone = np.arange(mesh.receiver_count)
+    emitted = area @ problem.average(everyone, problem.receiver_emission)
     emitted_total = float(emitted.sum())
     start = time.perf_counter() - state.seconds
     rays_before = state.rays  # from a checkpoint; the engine counts this run's rays
     reason = "no-emission" if emitted_total <= 0 else ""
     residual = 0.0
-    state.spread = problem.spread(state)
+    state.spread, state.peak = problem.spread(state.irradiance, state.entry_shot, state.unshot)
+    emitters = np.flatnonzero((problem.average(everyone, problem.receiver_emission) > 0).any(1))
     while not reason:
         residual = float((area @ state.unshot_magnitude).sum()) / emitted_total
-        reason = _stop_reason(state, settings, residual, time.perf_counter() - start)
+        direct = bool((state.shot[emitters] != 0).any(axis=1).all())
+        reason = _stop_reason(state, settings, residual, time.perf_counter() - start, direct)
         if not reason and stop is not None and stop():
             reason = "interrupted"
         if reason:
@@ -478,7 +394,7 @@ def solve(
             reason = "converged"
             break
         _shoot(problem, state, engine.column(patch), patch, amount[patch])
-        state.spread = problem.spread(state)
+        state.spread, state.peak = problem.spread(state.irradiance, state.entry_shot, state.unshot)
         state.rays = rays_before + engine.rays_cast
         state.seconds = time.perf_counter() - start
         _guard_growth(state, area, settings)
@@ -505,19 +421,21 @@ def solve(
 
 
 def _stop_reason(
-    state: SolverState, settings: SolveSettings, residual: float, elapsed: float
+    state: SolverState, settings: SolveSettings, residual: float, elapsed: float, direct: bool
 ) -> str:
+    """Why to stop now ("" to go on); the time limit waits for ``direct``: every emitter
+    has shot once, so that a time-limited answer always has its direct light."""
     if residual <= settings.tolerance:
         return "converged"
     if settings.max_shots is not None and state.shots >= settings.max_shots:
         return "max-shots"
-    if settings.time_limit is not None and elapsed >= settings.time_limit:
+    if settings.time_limit is not None and elapsed >= settings.time_limit and direct:
         return "time-limit"
     return ""
 
 
 def _shoot(
-    problem: _Problem, state: SolverState, column: Column, patch: int, amount: np.ndarray
+    problem: DiscreteSystem, state: SolverState, column: Column, patch: int, amount: np.ndarray
 ) -> None:
     """Shoot ``amount`` ((3,) [W m-2]) from ``patch`` through its form-factor column.
 

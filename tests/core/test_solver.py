@@ -186,10 +186,14 @@ def test_max_shots(prepare_furnace: Callable[..., Prepared]) -> None:
     assert result.residual > 1e-3
 
 
-def test_time_limit(prepare_furnace: Callable[..., Prepared]) -> None:
-    result = _solve(prepare_furnace(0.9, 1.0), time_limit=1e-9)
+def test_time_limit_stops_once_every_emitter_has_shot(
+    prepare_furnace: Callable[..., Prepared],
+) -> None:
+    prepared = prepare_furnace(0.9, 1.0)  # every patch emits
+    result = _solve(prepared, time_limit=1e-9)
     assert result.stop_reason == "time-limit"
-    assert result.state.shots <= 1
+    assert result.state.shots == prepared.mesh.patch_count
+    assert (result.state.shot > 0).all()  # each once: the direct light is complete
 
 
 def test_no_emission(prepare_furnace: Callable[..., Prepared]) -> None:

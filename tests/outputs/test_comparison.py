@@ -56,6 +56,9 @@ def test_compare_writes_json_markdown_and_plot(
         assert row["stop_reason"] == "converged"
         assert row["final_true_rms"] < 1e-3
         assert row["shots_to_0.01"] <= row["shots_to_0.001"] <= row["shots"]
+    # one form-factor pass for all: the same rays and set-up seconds in every row
+    assert len({row["rays"] for row in summary["table"]}) == 1
+    assert len({row["setup_seconds"] for row in summary["table"]}) == 1
 
 
 @pytest.mark.parametrize("name", list(COMPARED))

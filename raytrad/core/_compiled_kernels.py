@@ -1,0 +1,232 @@
+"""The loops behind :mod:`raytrad.core.compiled`, written for numba (imported only there).
+
+Plain Python as written here; :func:`raytrad.core.compiled.get` compiles every function in
+:data:`KERNELS` with numba (``njit(cache=True, nogil=True)``) and rebinds it in this
+module, helpers first, so that the kernels call each other compiled. Each computes the
+same formula, in the same order, as its numpy reference in :mod:`raytrad.core.kernels`;
+see there for shapes, units and sources.
+"""
+
+# mypy: ignore-errors
+
+import math
+
+import numpy as np
+
+#: Every function to compile, each after the helpers it calls.
+KERNELS = (
+    "edge_term",
+    "lambert",
+    "clipped_factor",
+    "polygon_form_factor",
+    "contour_form_factor",
+    "linear_corner_shares",
+    "facing_triangle_sums",
+    "sample_weights",
+    "segment_rays",
+    "patch_spread",
+)
+
+
+def edge_term(ux, uy, uz, vx, vy, vz, n):
+    """``gamma n.(u x v) / |u x v|`` of one edge, u and v from the receiver to its ends
+    (a term of :func:`raytrad.core.kernels.edge_sum`; 0 for an edge through the receiver)."""
+    lu = max(math.sqrt(ux * ux + uy * uy + uz * uz), 1e-300)
+    lv = max(math.sqrt(vx * vx + vy * vy + vz * vz), 1e-300)
+    ux, uy, uz = ux / lu, uy / lu, uz / lu
+    vx, vy, vz = vx / lv, vy / lv, vz / lv
+    cx = uy * vz - uz * vy
+    cy = uz * vx - ux * vz
+    cz = ux * vy - uy * vx
+    sin = math.sqrt(cx * cx + cy * cy + cz * cz)
+    if sin > 0.0:
+        gamma = math.atan2(sin, ux * vx + uy * vy + uz * vz)
+        return gamma * ((cx * n[0] + cy * n[1] + cz * n[2]) / sin)
+    return 0.0
+
+
+def lambert(poly, count, x, n):
+    """Lambert's formula over the first ``count`` corners of ``poly``."""
+    total = 0.0
+    for e in range(count):
+        a = poly[e]
+        b = poly[(e + 1) % count]
+        total += edge_term(
+            a[0] - x[0], a[1] - x[1], a[2] - x[2], b[0] - x[0], b[1] - x[1], b[2] - x[2], n
+        )
+    return abs(total) / (2.0 * math.pi)
+
+
+def clipped_factor(tri, x, n, work):
+    """Exact factor of one triangle clipped to the receiver's horizon
+    (polygon_form_factor for one pair; ``work`` is a (4, 3) scratch buffer)."""
+    h0 = (tri[0, 0] - x[0]) * n[0] + (tri[0, 1] - x[1]) * n[1] + (tri[0, 2] - x[2]) * n[2]
+    h1 = (tri[1, 0] - x[0]) * n[0] + (tri[1, 1] - x[1]) * n[1] + (tri[1, 2] - x[2]) * n[2]
+    h2 = (tri[2, 0] - x[0]) * n[0] + (tri[2, 1] - x[1]) * n[1] + (tri[2, 2] - x[2]) * n[2]
+    if h0 >= 0.0 and h1 >= 0.0 and h2 >= 0.0:
+        return lambert(tri, 3, x, n)
+    if not (h0 > 0.0 or h1 > 0.0 or h2 > 0.0):
+        return 0.0
+    h = (h0, h1, h2)
+    count = 0
+    for k in range(3):
+        j = (k + 1) % 3
+        ha, hb = h[k], h[j]
+        if ha >= 0.0 and count < 4:
+            work[count, 0] = tri[k, 0]
+            work[count, 1] = tri[k, 1]
+            work[count, 2] = tri[k, 2]
+            count += 1
+        if (ha >= 0.0) != (hb >= 0.0) and count < 4:
+            t = ha / (ha - hb)
+            for d in range(3):
+                work[count, d] = tri[k, d] + t * (tri[j, d] - tri[k, d])
+            count += 1
+    if count < 3:
+        return 0.0
+    return lambert(work, count, x, n)
+
+
+def polygon_form_factor(polygons, points, normals):
+    out = np.empty(len(polygons))
+    work = np.empty((4, 3))
+    for i in range(len(polygons)):
+        out[i] = clipped_factor(polygons[i], points[i], normals[i], work)
+    return out
+
+
+def contour_form_factor(start, end, points, normals):
+    out = np.empty(len(points))
+    for i in range(len(points)):
+        x, n = points[i], normals[i]
+        total = 0.0
+        for e in range(len(start)):
+            a, b = start[e], end[e]
+            total += edge_term(
+                a[0] - x[0], a[1] - x[1], a[2] - x[2], b[0] - x[0], b[1] - x[1], b[2] - x[2], n
+            )
+        out[i] = abs(total) / (2.0 * math.pi)
+    return out
+
+
+def linear_corner_shares(triangles, points, normals, bary, centroids):
+    out = np.empty((len(triangles), 3))
+    part = np.empty((3, 3))
+    work = np.empty((4, 3))
+    for i in range(len(triangles)):
+        tri = triangles[i]
+        total = 0.0
+        s0 = s1 = s2 = 0.0
+        for s in range(len(bary)):
+            for k in range(3):
+                for d in range(3):
+                    part[k, d] = (
+                        bary[s, k, 0] * tri[0, d]
+                        + bary[s, k, 1] * tri[1, d]
+                        + bary[s, k, 2] * tri[2, d]
+                    )
+            f = clipped_factor(part, points[i], normals[i], work)
+            total += f
+            s0 += f * centroids[s, 0]
+            s1 += f * centroids[s, 1]
+            s2 += f * centroids[s, 2]
+        if total > 0.0:
+            out[i, 0], out[i, 1], out[i, 2] = s0 / total, s1 / total, s2 / total
+        else:
+            out[i, 0] = out[i, 1] = out[i, 2] = 1.0 / 3.0
+    return out
+
+
+def facing_triangle_sums(points, normals, corners, triangle_normals, margin):
+    """Sum over every triangle of the exact clipped factor from each receiver, counting
+    only triangles whose lit side faces it by more than ``margin`` (the straddling-patch
+    sum of :meth:`raytrad.core.formfactor.FormFactorEngine._unoccluded`)."""
+    out = np.zeros(len(points))
+    work = np.empty((4, 3))
+    for i in range(len(points)):
+        x, n = points[i], normals[i]
+        total = 0.0
+        for t in range(len(corners)):
+            c = corners[t]
+            m = triangle_normals[t]
+            front = (x[0] - c[0, 0]) * m[0] + (x[1] - c[0, 1]) * m[1] + (x[2] - c[0, 2]) * m[2]
+            if front > margin:
+                total += clipped_factor(c, x, n, work)
+        out[i] = total
+    return out
+
+
+def sample_weights(points, normals, samples, sample_normals, near_reach, area):
+    """Disk-approximation weights of far sample pairs and the near mask (see
+    :func:`raytrad.core.kernels.numpy_sample_weights`)."""
+    c_count, s_count = len(points), len(samples)
+    weight = np.zeros((c_count, s_count))
+    far = np.zeros((c_count, s_count), dtype=np.bool_)
+    near = np.zeros((c_count, s_count), dtype=np.bool_)
+    for c in range(c_count):
+        x, n = points[c], normals[c]
+        for s in range(s_count):
+            dx = samples[s, 0] - x[0]
+            dy = samples[s, 1] - x[1]
+            dz = samples[s, 2] - x[2]
+            r2 = dx * dx + dy * dy + dz * dz
+            r = math.sqrt(r2)
+            inv_r = 1.0 / (r if r > 0.0 else 1.0)
+            if r < near_reach[s]:
+                near[c, s] = True
+                continue
+            cos_r = (dx * n[0] + dy * n[1] + dz * n[2]) * inv_r
+            m = sample_normals[s]
+            cos_s = -(dx * m[0] + dy * m[1] + dz * m[2]) * inv_r
+            if cos_r > 0.0 and cos_s > 0.0:
+                far[c, s] = True
+                weight[c, s] = cos_r * cos_s * area[s] / (math.pi * r2 + area[s])
+    return weight, far, near
+
+
+def segment_rays(origins, targets, shift, shorten):
+    """float32 rays from ``origins`` to ``targets``, both moved by ``-shift`` (see
+    :func:`raytrad.core.kernels.numpy_segment_rays`)."""
+    count = len(origins)
+    o = np.empty((count, 3), dtype=np.float32)
+    d = np.empty((count, 3), dtype=np.float32)
+    t = np.empty(count, dtype=np.float32)
+    for i in range(count):
+        dx = targets[i, 0] - origins[i, 0]
+        dy = targets[i, 1] - origins[i, 1]
+        dz = targets[i, 2] - origins[i, 2]
+        length = math.sqrt(dx * dx + dy * dy + dz * dz)
+        scale = length if length > 0.0 else 1.0
+        o[i, 0] = origins[i, 0] - shift[0]
+        o[i, 1] = origins[i, 1] - shift[1]
+        o[i, 2] = origins[i, 2] - shift[2]
+        d[i, 0] = dx / scale
+        d[i, 1] = dy / scale
+        d[i, 2] = dz / scale
+        t[i] = max(length - shorten, 0.0)
+    return o, d, t
+
+
+def patch_spread(
+    entry_receiver,
+    entry_patch,
+    entry_weight,
+    emission,
+    reflectance,
+    irradiance,
+    entry_shot,
+    unshot,
+    patch_count,
+):
+    """Per patch ``sum_k W_pk |dB_pk - dB_p|`` and ``max_k |dB_pk|`` (see
+    :meth:`raytrad.core.system.DiscreteSystem.numpy_spread`)."""
+    spread = np.zeros((patch_count, 3))
+    peak = np.zeros((patch_count, 3))
+    for e in range(len(entry_receiver)):
+        k = entry_receiver[e]
+        p = entry_patch[e]
+        for c in range(3):
+            own = emission[k, c] + reflectance[k, c] * irradiance[k, c] - entry_shot[e, c]
+            spread[p, c] += entry_weight[e] * abs(own - unshot[p, c])
+            peak[p, c] = max(peak[p, c], abs(own))
+    return spread, peak

@@ -1,0 +1,143 @@
+"""The discrete radiosity system's static arrays: the patch-average matrix W and what
+the solver reads per receiver and per patch.
+
+A patch's radiosity is the area-weighted mean of its receivers', ``B_p = sum_k W_pk B_k``
+with ``W_pk = (a_k / 3 summed over the patch's triangles at k) / A_p`` (hidden receivers
+count for nothing). :class:`DiscreteSystem` holds W as CSR by receiver and by patch, and
+computes what the solver needs of it per shot.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from raytrad.core import compiled
+from raytrad.core.mesh import RadiosityMesh
+
+
+@dataclass(frozen=True)
+class DiscreteSystem:
+    """Static arrays of the discrete system."""
+
+    patch_area: np.ndarray  # (P,)
+    patch_reflectance: np.ndarray  # (P, 3)
+    receiver_area: np.ndarray  # (R,)
+    receiver_reflectance: np.ndarray  # (R, 3)
+    receiver_emission: np.ndarray  # (R, 3)
+    receiver_ptr: np.ndarray  # (R + 1,) CSR rows of W^T
+    entry_patch: np.ndarray  # (nnz,)
+    entry_weight: np.ndarray  # (nnz,) W[patch, receiver]
+    entry_receiver: np.ndarray  # (nnz,)
+    patch_entries: np.ndarray  # (nnz,) entries grouped by patch
+    patch_ptr: np.ndarray  # (P + 1,) CSR pointers into patch_entries
+    scratch: np.ndarray  # (R, 3) zeros, a work array of _shoot
+
+    @classmethod
+    def from_mesh(cls, mesh: RadiosityMesh) -> DiscreteSystem:
+        tri_patch = np.repeat(mesh.triangle_patch, 3)
+        receiver = mesh.triangle_receivers.reshape(-1)
+        weight = np.repeat(mesh.triangle_area / 3.0, 3) / mesh.patch_area[tri_patch]
+        if mesh.receiver_visible is not None:  # hidden receivers do not count
+            weight = weight * mesh.receiver_visible[receiver]
+        # merge duplicate (receiver, patch) entries
+        key = receiver * mesh.patch_count + tri_patch
+        uniq, inverse = np.unique(key, return_inverse=True)
+        w = np.bincount(inverse.reshape(-1), weights=weight)
+        r = uniq // mesh.patch_count
+        ptr = np.searchsorted(r, np.arange(mesh.receiver_count + 1))
+        entry_patch = uniq % mesh.patch_count
+        by_patch = np.argsort(entry_patch, kind="stable")
+        return cls(
+            patch_area=mesh.patch_area,
+            patch_reflectance=mesh.patch_reflectance,
+            receiver_area=mesh.receiver_area,
+            receiver_reflectance=mesh.receiver_reflectance,
+            receiver_emission=mesh.receiver_emitted_exitance,
+            receiver_ptr=ptr,
+            entry_patch=entry_patch,
+            entry_weight=w,
+            entry_receiver=r,
+            patch_entries=by_patch,
+            patch_ptr=np.searchsorted(entry_patch[by_patch], np.arange(mesh.patch_count + 1)),
+            scratch=np.zeros((mesh.receiver_count, 3)),
+        )
+
+    def spread(
+        self, irradiance: np.ndarray, entry_shot: np.ndarray, unshot: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """How the receivers of each patch differ in what they still have to shoot.
+
+        Compiled when available (:mod:`raytrad.core.compiled`); :meth:`numpy_spread` is
+        the reference.
+
+        Parameters
+        ----------
+        irradiance : (R, 3) float64
+            Irradiance gathered so far [W m-2].
+        entry_shot : (nnz, 3) float64
+            Radiosity each (patch, receiver) entry has shot [W m-2].
+        unshot : (P, 3) float64
+            Unshot radiosity of each patch [W m-2].
+
+        Returns
+        -------
+        spread : (P, 3) float64, ``sum_k W_pk |dB_pk - dB_p|`` [W m-2]
+        peak : (P, 3) float64, ``max_k |dB_pk|`` [W m-2]
+        """
+        fast = compiled.get()
+        if fast is None:
+            return self.numpy_spread(irradiance, entry_shot, unshot)
+        spread, peak = fast.patch_spread(
+            self.entry_receiver,
+            self.entry_patch,
+            self.entry_weight,
+            self.receiver_emission,
+            self.receiver_reflectance,
+            np.ascontiguousarray(irradiance),
+            np.ascontiguousarray(entry_shot),
+            np.ascontiguousarray(unshot),
+            len(self.patch_area),
+        )
+        return np.asarray(spread), np.asarray(peak)
+
+    def numpy_spread(
+        self, irradiance: np.ndarray, entry_shot: np.ndarray, unshot: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`spread` in numpy (the reference)."""
+        k = self.entry_receiver
+        own = self.receiver_emission[k] + self.receiver_reflectance[k] * irradiance[k] - entry_shot
+        deviation = self.entry_weight[:, None] * np.abs(own - unshot[self.entry_patch])
+        count = len(self.patch_area)
+        peak = np.zeros((count, 3))
+        np.maximum.at(peak, self.entry_patch, np.abs(own))
+        spread = np.stack(
+            [np.bincount(self.entry_patch, deviation[:, c], minlength=count) for c in range(3)],
+            axis=1,
+        )
+        return spread, peak
+
+    def average(self, receivers: np.ndarray, values: np.ndarray) -> np.ndarray:
+        """``W[:, receivers] @ values``: patch means of per-receiver values ((K, 3) -> (P, 3))."""
+        start, stop = self.receiver_ptr[receivers], self.receiver_ptr[receivers + 1]
+        counts = stop - start
+        rows = np.repeat(np.arange(len(receivers)), counts)
+        entries = np.repeat(start, counts) + (
+            np.arange(len(rows)) - np.repeat(np.cumsum(counts) - counts, counts)
+        )
+        p = self.entry_patch[entries]
+        w = self.entry_weight[entries]
+        out = np.empty((len(self.patch_area), 3))
+        for c in range(3):
+            out[:, c] = np.bincount(p, weights=w * values[rows, c], minlength=len(self.patch_area))
+        return out
+
+
+def patch_average_matrix(mesh: RadiosityMesh) -> np.ndarray:
+    """(P, R) float64 dense W: patch radiosity as the area-weighted mean of its receivers."""
+    problem = DiscreteSystem.from_mesh(mesh)
+    matrix = np.zeros((mesh.patch_count, mesh.receiver_count))
+    rows = np.repeat(np.arange(mesh.receiver_count), np.diff(problem.receiver_ptr))
+    matrix[problem.entry_patch, rows] = problem.entry_weight
+    return matrix

@@ -1,0 +1,154 @@
+"""The compiled kernels (numba) against their numpy references in raytrad.core.kernels.
+
+Random pairs and the adversarial ones where a form-factor kernel goes wrong first: a
+receiver in the triangle's plane (grazing), a receiver whose horizon contains the
+triangle (coplanar), corners exactly on or a rounding error off the horizon (straddling),
+a receiver on a corner or a hair off an edge, degenerate triangles.
+
+A receiver exactly *on* an edge, or inside a triangle in its plane, is not among them:
+there Lambert's formula is singular (the edge's plane through the receiver is undefined,
+and the factor's limit depends on the side approached from), so both implementations
+return a rounding-dependent value in [0, 1]. Receivers never sit there: their evaluation
+points move into their own triangles (:func:`raytrad.core.formfactor.receiver_points`).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from raytrad.core import compiled, kernels
+
+pytestmark = pytest.mark.skipif(compiled.get() is None, reason="numba is not installed")
+
+#: Agreement asked of compiled and numpy kernels (same formula, same order).
+AGREE = 1e-12
+
+
+def _unit(v: np.ndarray) -> np.ndarray:
+    return v / np.linalg.norm(v, axis=-1, keepdims=True)
+
+
+def adversarial_pairs(rng: np.random.Generator, count: int = 4000):
+    """(triangles (N, 3, 3), points (N, 3), normals (N, 3)): random and hard pairs."""
+    tri = rng.normal(size=(count, 3, 3))
+    x = rng.normal(size=(count, 3)) * 0.5
+    n = _unit(rng.normal(size=(count, 3)))
+    k = count // 8
+    # grazing: the receiver lies in the triangle's plane, beside it
+    a, b = tri[:k, 1] - tri[:k, 0], tri[:k, 2] - tri[:k, 0]
+    x[:k] = tri[:k, 0] - 0.7 * a - 0.4 * b
+    # coplanar: the triangle lies in the receiver's tangent plane, the receiver beside it
+    # (inside it the limit is singular, as on an edge)
+    s = slice(k, 2 * k)
+    n[s] = _unit(np.cross(tri[s, 1] - tri[s, 0], tri[s, 2] - tri[s, 0]))
+    n[s] *= rng.choice([-1.0, 1.0], size=(k, 1))
+    x[s] = tri[s, 0] - 0.6 * (tri[s, 1] - tri[s, 0]) - 0.3 * (tri[s, 2] - tri[s, 0])
+    # straddling: one corner exactly on the horizon, one a rounding error below
+    s = slice(2 * k, 3 * k)
+    h = np.einsum("ikj,ij->ik", tri[s] - x[s, None, :], n[s])
+    tri[s, 0] -= h[:, 0, None] * n[s]
+    tri[s, 1] -= (h[:, 1, None] + 1e-17) * n[s]
+    # the receiver on a corner, and a thousandth of the edge's length off its midpoint
+    s = slice(3 * k, 4 * k)
+    x[s] = tri[s, 2]
+    s = slice(4 * k, 5 * k)
+    edge = np.linalg.norm(tri[s, 1] - tri[s, 0], axis=1)[:, None]
+    x[s] = 0.5 * (tri[s, 0] + tri[s, 1]) + 1e-3 * edge * _unit(rng.normal(size=(k, 3)))
+    # degenerate: two corners equal, or all three on a line
+    s = slice(5 * k, 6 * k)
+    tri[s, 1] = tri[s, 0]
+    s = slice(6 * k, 7 * k)
+    tri[s, 2] = 2.0 * tri[s, 1] - tri[s, 0]
+    return tri, x, n
+
+
+def test_polygon_form_factor_agrees_with_numpy():
+    tri, x, n = adversarial_pairs(np.random.default_rng(1))
+    got = kernels.polygon_form_factor(tri, x, n)
+    want = kernels.numpy_polygon_form_factor(tri, x, n)
+    assert np.isfinite(got).all()
+    np.testing.assert_allclose(got, want, rtol=0, atol=AGREE)
+    assert (want > 0).sum() > len(tri) // 3  # the cases are not all trivially zero
+
+
+def test_contour_form_factor_agrees_with_numpy():
+    rng = np.random.default_rng(2)
+    # an L-shaped planar patch outline (6 boundary edges) and receivers all around it,
+    # some in its plane and some on its boundary
+    outline = np.array([[0, 0, 0], [2, 0, 0], [2, 0, 1], [1, 0, 1], [1, 0, 2], [0, 0, 2.0]])
+    start, end = outline, np.roll(outline, -1, axis=0)
+    x = rng.normal(size=(3000, 3))
+    x[:300, 1] = 0.0
+    x[300:400] = outline[rng.integers(0, 6, 100)]
+    n = _unit(rng.normal(size=(3000, 3)))
+    got = kernels.contour_form_factor(start, end, x, n)
+    want = kernels.numpy_contour_form_factor(start, end, x, n)
+    np.testing.assert_allclose(got, want, rtol=0, atol=AGREE)
+
+
+@pytest.mark.parametrize("levels", [2, 3])
+def test_linear_corner_shares_agree_with_numpy(levels):
+    tri, x, n = adversarial_pairs(np.random.default_rng(3), 1600)
+    got = kernels.linear_corner_shares(tri, x, n, levels)
+    want = kernels.numpy_linear_corner_shares(tri, x, n, levels)
+    np.testing.assert_allclose(got.sum(axis=1), 1.0, atol=AGREE)
+    assert ((got >= 0) & (got <= 1)).all()
+    # shares are ratios of factor sums: where the receiver sees next to nothing of the
+    # triangle (a factor of 1e-17, rounding noise at grazing) they are ratios of noise, and
+    # weigh nothing; compare them where the ratio is well conditioned
+    seen = kernels.numpy_polygon_form_factor(tri, x, n) > 1e-3
+    assert seen.sum() > len(tri) // 4
+    np.testing.assert_allclose(got[seen], want[seen], rtol=0, atol=AGREE)
+
+
+def test_facing_triangle_sums_agree_with_numpy():
+    tri, x, n = adversarial_pairs(np.random.default_rng(4), 240)
+    with np.errstate(invalid="ignore"):
+        normals = _unit(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]))
+    normals = np.where(np.isfinite(normals), normals, 0.0)  # degenerate: face nowhere
+    got = kernels.facing_triangle_sums(x, n, tri, normals, 1e-9)
+    want = kernels.numpy_facing_triangle_sums(x, n, tri, normals, 1e-9)
+    np.testing.assert_allclose(got, want, rtol=0, atol=AGREE * len(tri))
+    assert (want > 0).mean() > 0.5
+
+
+def test_sample_weights_agree_with_numpy():
+    rng = np.random.default_rng(5)
+    x = rng.normal(size=(300, 3))
+    n = _unit(rng.normal(size=(300, 3)))
+    y = rng.normal(size=(50, 3))
+    y[:5] = x[:5]  # a sample exactly at a receiver
+    ny = _unit(rng.normal(size=(50, 3)))
+    reach = rng.uniform(0.0, 0.8, 50)
+    area = rng.uniform(1e-4, 0.1, 50)
+    got = kernels.sample_weights(x, n, y, ny, reach, area)
+    want = kernels.numpy_sample_weights(x, n, y, ny, reach, area)
+    np.testing.assert_allclose(got[0], want[0], rtol=0, atol=AGREE)
+    np.testing.assert_array_equal(got[1], want[1])
+    np.testing.assert_array_equal(got[2], want[2])
+    assert got[1].any() and got[2].any()
+
+
+def test_segment_rays_agree_with_numpy():
+    rng = np.random.default_rng(6)
+    a = rng.normal(size=(1000, 3)) * 1e3
+    b = a + rng.normal(size=(1000, 3))
+    b[:10] = a[:10]  # zero-length segments
+    shift = np.array([1e3, -2e3, 5.0])
+    for got, want in zip(
+        kernels.segment_rays(a, b, shift, 1e-4),
+        kernels.numpy_segment_rays(a, b, shift, 1e-4),
+        strict=True,
+    ):
+        assert got.dtype == want.dtype == np.float32
+        np.testing.assert_array_equal(got, want)
+
+
+def test_numpy_kernels_on_request(monkeypatch):
+    monkeypatch.setenv("RAYTRAD_KERNELS", "numpy")
+    assert compiled.get() is None
+    tri, x, n = adversarial_pairs(np.random.default_rng(7), 80)
+    np.testing.assert_array_equal(
+        kernels.polygon_form_factor(tri, x, n), kernels.numpy_polygon_form_factor(tri, x, n)
+    )

@@ -1,0 +1,215 @@
+"""Speed of the form-factor pass and the whole render, each against a baseline measured in
+the same run.
+
+Three tables:
+
+1. **Pass against raw Embree.** The Cornell box's form-factor pass (every column, as
+   ``raytrad render`` computes it before the first shot) is timed with its rays
+   recorded; the same rays are then replayed through embreex's occlusion query, with the
+   same threads, in the same process. Effective rays/s = rays / pass seconds.
+2. **Compiled against numpy kernels.** The same pass with ``RAYTRAD_KERNELS=numpy`` (the
+   numpy reference kernels) in the same process, and the check that both give the same
+   factors.
+3. **Whole renders and scale.** ``raytrad render`` of the bundled Cornell box at each
+   ``--receivers``, as a child process: seconds per stage from ``report.json``, shots,
+   rays and peak memory; with ``--previous RAYTRAD`` (the ``raytrad`` executable of
+   another install, e.g. the previous release in its own venv) the same renders by it,
+   alternating, and the time ratio. The growth exponent of the total time is fitted over
+   the sizes.
+
+    python tools/bench_performance.py                                # 5000 receivers
+    python tools/bench_performance.py --receivers 5000 20000 --previous ../venv-prev/bin/raytrad
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT))
+
+from raytrad.core.mesh import MeshSettings  # noqa: E402
+from raytrad.core.pipeline import prepare  # noqa: E402
+from raytrad.core.visibility import Occluder  # noqa: E402
+from raytrad.scene.builtin import cornell_box  # noqa: E402
+
+SCENE = ROOT / "scenes" / "cornell-box.obj"
+#: Runs argv[1:] and prints its peak resident memory [KiB] (Linux ru_maxrss).
+_MEASURE = (
+    "import resource, subprocess, sys; subprocess.run(sys.argv[1:], check=True); "
+    "print(resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss)"
+)
+
+
+def timed_pass(receivers: int, record: bool) -> tuple[float, object, list]:
+    """(seconds of the form-factor pass, the prepared scene, recorded ray batches)."""
+    batches: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
+    original = Occluder.occluded_local
+
+    def recording(self, o, d, t):  # type: ignore[no-untyped-def]
+        if record:
+            batches.append((np.array(o, np.float32), np.array(d, np.float32), np.array(t)))
+        return original(self, o, d, t)
+
+    Occluder.occluded_local = recording  # type: ignore[method-assign]
+    try:
+        prepared = prepare(cornell_box(), MeshSettings(receivers=receivers))
+    finally:
+        Occluder.occluded_local = original  # type: ignore[method-assign]
+    return prepared.timings["form_factors"], prepared, batches
+
+
+def _dense(engine: object, patch: int) -> np.ndarray:
+    """(R,) balanced form factors of every receiver to ``patch``."""
+    column = engine.column(patch)  # type: ignore[attr-defined]
+    out = np.zeros(engine.mesh.receiver_count)  # type: ignore[attr-defined]
+    out[column.receivers] = column.factors
+    return out
+
+
+def replay(occluder: Occluder, batches: list) -> tuple[float, int]:
+    """Seconds for embreex to answer the recorded occlusion queries (same threads)."""
+    start = time.perf_counter()
+    rays = 0
+    for o, d, t in batches:
+        occluder.occluded_local(o, d, t)
+        rays += len(o)
+    return time.perf_counter() - start, rays
+
+
+def pass_table(receivers: int) -> None:
+    from raytrad.core import compiled
+
+    compiled.get()  # compile (or load) before timing
+    prepare(cornell_box(), MeshSettings(receivers=200)).close()
+    seconds, prepared, batches = timed_pass(receivers, record=True)
+    try:
+        embree, rays = replay(prepared.occluder, batches)
+        factors = [_dense(prepared.engine, p) for p in range(0, prepared.mesh.patch_count, 7)]
+    finally:
+        prepared.close()
+    os.environ["RAYTRAD_KERNELS"] = "numpy"
+    try:
+        numpy_seconds, reference, _ = timed_pass(receivers, record=False)
+        patches = range(0, reference.mesh.patch_count, 7)
+        worst = max(
+            float(np.abs(_dense(reference.engine, p) - f).max())
+            for p, f in zip(patches, factors, strict=True)
+        )
+        reference.close()
+    finally:
+        del os.environ["RAYTRAD_KERNELS"]
+    print(
+        f"\nform-factor pass, Cornell box, --receivers {receivers} "
+        f"({prepared.mesh.receiver_count} receivers)"
+    )
+    print("| pass | seconds | rays | rays/s | share of raw Embree |")
+    print("|---|---|---|---|---|")
+    print(
+        f"| raw embreex occlusion, same rays | {embree:.2f} | {rays:.3g} | "
+        f"{rays / embree:.3g} | 100% |"
+    )
+    print(
+        f"| raytrad pass, compiled kernels | {seconds:.2f} | {rays:.3g} | {rays / seconds:.3g} "
+        f"| {100 * embree / seconds:.0f}% |"
+    )
+    print(
+        f"| raytrad pass, numpy kernels | {numpy_seconds:.2f} | {rays:.3g} | "
+        f"{rays / numpy_seconds:.3g} | {100 * embree / numpy_seconds:.0f}% |"
+    )
+    print(
+        f"compiled / numpy time: {seconds / numpy_seconds:.2f}; largest factor difference "
+        f"(every 7th column): {worst:.1e}"
+    )
+
+
+def render_once(raytrad: str, receivers: int) -> dict[str, float]:
+    """One ``raytrad render`` as a child: stage seconds, shots, rays, peak MiB, wall s."""
+    with tempfile.TemporaryDirectory() as out:
+        # a small Python parent runs the render, so that the child's peak memory is its
+        # own (a child forked from this process would count this process's memory too)
+        start = time.perf_counter()
+        command = [raytrad, "render", str(SCENE), "-o", out, "--receivers", str(receivers), "-q"]
+        done = subprocess.run(
+            [sys.executable, "-c", _MEASURE, *command],
+            check=True,
+            capture_output=True,
+            text=True,
+        )
+        wall = time.perf_counter() - start
+        peak_kib = float(done.stdout.split()[-1])
+        report = json.loads((Path(out) / "report.json").read_text())
+    timings = report["timings_seconds"]
+    return {
+        "wall": wall,
+        "form_factors": timings["form_factors"],
+        "solve": timings["solve"],
+        "refine": timings.get("refine", 0.0),
+        "shots": report["solve"]["shots"],
+        "rays": report["solve"]["rays"],
+        "receivers": report["statistics"]["receivers"],
+        "peak_mib": peak_kib / 1024.0,
+    }
+
+
+def render_table(sizes: list[int], previous: str | None, runs: int) -> None:
+    here = str(Path(sys.executable).parent / "raytrad")
+    rows = []
+    for receivers in sizes:
+        now, old = [], []
+        for _ in range(runs):  # alternate, so that drift hits both alike
+            now.append(render_once(here, receivers))
+            if previous:
+                old.append(render_once(previous, receivers))
+        rows.append((receivers, now, old))
+    print("\nwhole renders (child processes; medians of", runs, "runs)")
+    head = (
+        "| --receivers | receivers | wall s | form factors s | solve s | refine s | shots "
+        "| rays | peak MiB |"
+    )
+    if previous:
+        head += " previous wall s | now / previous |"
+    print(head)
+    print("|" + "---|" * (head.count("|") - 1))
+    for receivers, now, old in rows:
+        med = {k: float(np.median([r[k] for r in now])) for k in now[0]}
+        line = (
+            f"| {receivers} | {med['receivers']:.0f} | {med['wall']:.1f} | "
+            f"{med['form_factors']:.1f} | "
+            f"{med['solve']:.1f} | {med['refine']:.1f} | {med['shots']:.0f} | {med['rays']:.3g} | "
+            f"{med['peak_mib']:.0f} |"
+        )
+        if old:
+            ratio = np.median([a["wall"] / b["wall"] for a, b in zip(now, old, strict=True)])
+            line += f" {np.median([r['wall'] for r in old]):.1f} | {ratio:.2f} |"
+        print(line)
+    if len(rows) >= 2:
+        n = np.log([np.median([r["receivers"] for r in now]) for _, now, _ in rows])
+        t = np.log([np.median([r["wall"] for r in now]) for _, now, _ in rows])
+        print(f"total time grows as receivers^{np.polyfit(n, t, 1)[0]:.2f} over these sizes")
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--receivers", type=int, nargs="+", default=[5000])
+    parser.add_argument("--previous", default=None, help="another install's raytrad executable")
+    parser.add_argument("--runs", type=int, default=1, help="renders per size and install")
+    parser.add_argument("--no-pass", action="store_true", help="skip the pass tables")
+    args = parser.parse_args(argv)
+    if not args.no_pass:
+        pass_table(args.receivers[0])
+    render_table(args.receivers, args.previous, args.runs)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
