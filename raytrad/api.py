@@ -44,7 +44,7 @@ from raytrad.formats.ply import read_radiosity_ply
 from raytrad.outputs.comparison import markdown_table, write_comparison
 from raytrad.outputs.plot import plot_convergence
 from raytrad.outputs.report import add_error_log, add_total_error, build_report, write_report
-from raytrad.outputs.resume import checkpoint_path, fingerprint, load_state, save_state
+from raytrad.outputs.resume import checkpoint_path, fingerprint, resume_point, save_state
 from raytrad.outputs.write import check_output_range, write_outputs
 from raytrad.products.framing import file_camera
 from raytrad.products.lightmap import choose_lightmap_uvs
@@ -117,12 +117,12 @@ def load(path: str | os.PathLike[str], settings: RenderSettings | None = None) -
 
 
 def prepare(
-    scene: Scene, settings: RenderSettings | None = None, stop: StopPoll = None
+    scene: Scene, settings: RenderSettings | None = None, stop: StopPoll = None, columns: Any = None
 ) -> Prepared:
-    """Repair, mesh and balance ``scene`` (:func:`raytrad.core.pipeline.prepare`; ``stop``
-    cuts the form-factor pass short)."""
+    """Repair, mesh and balance ``scene`` (:func:`raytrad.core.pipeline.prepare`: ``stop``
+    cuts the form-factor pass short, ``columns`` of an earlier one are reused)."""
     settings = settings or RenderSettings()
-    return pipeline.prepare(scene, settings.mesh, settings.cache_mb, stop)
+    return pipeline.prepare(scene, settings.mesh, settings.cache_mb, stop, columns)
 
 
 def solve_scene(
@@ -252,19 +252,20 @@ def render(
         log.warning("%s: the scene has no emitter; every radiosity is zero", scene_path)
     key = fingerprint(loaded.scene, settings.system_settings())
     checkpoint = checkpoint_path(output_dir, scene_path.stem)
-    state = None
-    if resume and checkpoint.exists():
-        state = load_state(checkpoint, key)
-        log.info("resuming from %s at shot %d", checkpoint, state.shots)
-    prepared = prepare(loaded.scene, settings, budget)
+    state, columns = resume_point(checkpoint, key) if resume else (None, None)
+    prepared = prepare(loaded.scene, settings, budget, columns)
     timings.update(prepared.timings)
+
+    def save(state: SolverState) -> None:  # with the columns of a pass cut short
+        save_state(checkpoint, state, key, prepared.engine.pass_columns())
+
     try:
         ref = None
         if reference is not None:
             with timed(timings, "reference"):
                 ref = make_reference(reference, prepared)
         monitor = ConvergenceMonitor(prepared.mesh, prepared.engine, ref)
-        on_shot = _shot_hook(monitor, progress, settings, checkpoint, key)
+        on_shot = _shot_hook(monitor, progress, settings, save)
         with timed(timings, "solve"):
             solve_settings = budget.solve_settings(settings.solve, state.seconds if state else 0)
             result = solve(prepared.mesh, prepared.engine, solve_settings, state, on_shot, stop)
@@ -283,7 +284,7 @@ def render(
                 outputs["plot"] = output_dir / "convergence.png"
                 plot_convergence(outputs["plot"], {result.method: error_log}, str(scene_path))
         if result.stop_reason in RESUMABLE:
-            save_state(checkpoint, result.state, key)  # --resume continues from here
+            save(result.state)  # --resume continues from here
             outputs["checkpoint"] = checkpoint
         elif checkpoint.exists():
             checkpoint.unlink()
@@ -302,8 +303,7 @@ def _shot_hook(
     monitor: ConvergenceMonitor,
     progress: Callable[[RenderProgress], None] | None,
     settings: RenderSettings,
-    checkpoint: Path,
-    key: dict[str, Any],
+    save: Callable[[SolverState], None],
 ) -> Callable[[SolverState, float], None]:
     """The solver's per-shot hook: log the error, report progress, checkpoint periodically."""
     trend = ResidualTrend(settings.solve.tolerance)
@@ -318,7 +318,7 @@ def _shot_hook(
                 RenderProgress(state.shots, state.seconds, state.rays, residual, estimate, eta)
             )
         if time.perf_counter() - last_save[0] >= settings.checkpoint_seconds:
-            save_state(checkpoint, state, key)
+            save(state)
             last_save[0] = time.perf_counter()
 
     return on_shot

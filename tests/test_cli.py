@@ -240,7 +240,24 @@ def test_a_stop_in_the_form_factor_pass_saves_and_resumes(tmp_path: Path) -> Non
     assert (out / "cornell-box.checkpoint.npz").is_file() and (out / "cornell-box.ply").is_file()
     second = api.render(scene, out, settings, resume=True)
     assert second.result.stop_reason == "converged"
-    np.testing.assert_allclose(second.result.radiosity, straight.result.radiosity, rtol=1e-9)
+    # the columns of the cut pass came from the checkpoint: fewer rays, the same answer
+    assert second.result.state.rays < straight.result.state.rays
+    assert second.result.state.shots == straight.result.state.shots
+    np.testing.assert_array_equal(second.result.radiosity, straight.result.radiosity)
+
+
+def test_a_time_limited_pass_resumed_gives_the_uninterrupted_result(tmp_path: Path) -> None:
+    scene = SCENES / "cornell-box.obj"
+    mesh = MeshSettings(receivers=800, patches=60)
+    straight = api.render(scene, tmp_path / "straight", RenderSettings(mesh=mesh))
+    out = tmp_path / "limited"
+    limited = RenderSettings(mesh=mesh, solve=SolveSettings(time_limit=1e-3))
+    first = api.render(scene, out, limited)
+    assert first.result.stop_reason == "time-limit" and first.result.state.shots >= 1
+    second = api.render(scene, out, RenderSettings(mesh=mesh), resume=True)
+    assert second.result.stop_reason == "converged"
+    assert second.result.state.shots == straight.result.state.shots
+    np.testing.assert_array_equal(second.result.radiosity, straight.result.radiosity)
 
 
 def test_resume_refuses_a_checkpoint_of_other_settings(
@@ -258,3 +275,24 @@ def test_resume_refuses_a_checkpoint_of_other_settings(
     )
     assert status == 1
     assert "checkpoint" in err and len(err.strip().splitlines()) == 1
+
+
+def test_time_limit_bounds_the_form_factor_pass(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], caplog: pytest.LogCaptureFixture
+) -> None:
+    """../shared/cases/time-limit-not-bounding, in small: a budget spent before the pass
+    ends gives the direct light, a report, a PLY and a checkpoint, and says so."""
+    out = tmp_path / "out"
+    argv = ["render", str(SCENES / "cornell-box.obj"), "-o", str(out), "--receivers", "1500"]
+    status, _, _ = run_cli([*argv, "--patches", "80", "--time-limit", "0.001"], capsys)
+    assert status == 0
+    report = json.loads((out / "report.json").read_text())
+    assert report["statistics"]["form_factor_balance"]["complete"] is False
+    assert "form-factor pass stopped after" in caplog.text
+    solve = report["solve"]
+    assert solve["stop_reason"] == "time-limit"
+    # every lamp patch shot once, nothing else: the lamp is a few patches of 80
+    assert 1 <= solve["shots"] <= 4
+    assert {p.name for p in out.iterdir()} >= {"cornell-box.ply", "cornell-box.checkpoint.npz"}
+    _, _, radiosity = read_radiosity_ply(out / "cornell-box.ply")
+    assert np.isfinite(radiosity).all() and (radiosity > 0).mean() > 0.5  # lit, not just E

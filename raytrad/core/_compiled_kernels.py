@@ -25,6 +25,7 @@ KERNELS = (
     "sample_weights",
     "segment_rays",
     "patch_spread",
+    "patch_average",
 )
 
 
@@ -230,3 +231,17 @@ def patch_spread(
             spread[p, c] += entry_weight[e] * abs(own - unshot[p, c])
             peak[p, c] = max(peak[p, c], abs(own))
     return spread, peak
+
+
+def patch_average(receivers, values, receiver_ptr, entry_patch, entry_weight, patch_count):
+    """``W[:, receivers] @ values`` (see :meth:`raytrad.core.system.DiscreteSystem.average`)."""
+    out = np.zeros((patch_count, 3))
+    for i in range(len(receivers)):
+        k = receivers[i]
+        for e in range(receiver_ptr[k], receiver_ptr[k + 1]):
+            p = entry_patch[e]
+            w = entry_weight[e]
+            out[p, 0] += w * values[i, 0]
+            out[p, 1] += w * values[i, 1]
+            out[p, 2] += w * values[i, 2]
+    return out

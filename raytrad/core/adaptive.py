@@ -138,6 +138,14 @@ def refine_adaptively(
     out = Refinement(mesh, np.asarray(radiosity, dtype=np.float64))
     if settings.threshold <= 0:
         return out
+    if budget <= mesh.receiver_count:
+        log.warning(
+            "no refinement: the receiver budget (--max-receivers %d) is not above the %d "
+            "receivers solved",
+            budget,
+            mesh.receiver_count,
+        )
+        return out
     patch_radiosity = patch_means(mesh, radiosity)
     smallest = settings.smallest * engine.diagonal
     changes: list[tuple[np.ndarray, np.ndarray]] = []
@@ -146,10 +154,17 @@ def refine_adaptively(
             log.info("refinement stopped after %d rounds: the time limit is spent", out.rounds)
             break
         room = budget - out.mesh.receiver_count
-        split = _to_split(out.mesh, out.radiosity, settings, smallest, room)
-        if not split.any():
+        order = _to_split(out.mesh, out.radiosity, settings, smallest, room)
+        refined, parent = out.mesh, np.zeros(0, dtype=np.int64)
+        while len(order):  # the closure splits neighbours too: never beyond the budget
+            split = np.zeros(len(out.mesh.triangles), dtype=bool)
+            split[order] = True
+            refined, parent = subdivide(out.mesh, split)
+            if refined.receiver_count <= budget:
+                break
+            order = order[: len(order) // 2]
+        if not len(order):
             break
-        refined, parent = subdivide(out.mesh, split)
         new = np.arange(out.mesh.receiver_count, refined.receiver_count)
         if len(new) == 0:
             break
@@ -193,14 +208,14 @@ def _to_split(
     smallest: float,
     room: int,
 ) -> np.ndarray:
-    """(T,) bool: the triangles to split this round, worst first within ``room`` receivers."""
+    """The triangles to split this round, worst first, about ``room`` receivers' worth."""
     luminance = radiosity @ _LUMINANCE
     visible = mesh.receiver_area > 0
     if room <= 0 or not visible.any():
-        return np.zeros(len(mesh.triangles), dtype=bool)
+        return np.zeros(0, dtype=np.int64)
     level = float(np.average(luminance[visible], weights=mesh.receiver_area[visible]))
     if not level > 0.0:  # nothing lit (no emitter): nothing changes fast
-        return np.zeros(len(mesh.triangles), dtype=bool)
+        return np.zeros(0, dtype=np.int64)
     corner = luminance[mesh.triangle_receivers]
     corner_seen = visible[mesh.triangle_receivers]
     spread = np.ptp(corner, axis=1) / np.maximum(corner.mean(axis=1), settings.floor * level)
@@ -213,10 +228,7 @@ def _to_split(
     candidate = (spread > settings.threshold) & (longest > smallest)
     order = np.argsort(-np.where(candidate, spread, -np.inf), kind="stable")
     # each split adds about one receiver per triangle (a midpoint shared by two)
-    keep = order[: min(int(candidate.sum()), max(1, room // 2))]
-    out = np.zeros(len(mesh.triangles), dtype=bool)
-    out[keep] = True
-    return out
+    return order[: min(int(candidate.sum()), max(1, room // 2))]
 
 
 def subdivide(mesh: RadiosityMesh, split: np.ndarray) -> tuple[RadiosityMesh, np.ndarray]:

@@ -138,6 +138,8 @@ class FormFactorEngine:
         self._final_rows: np.ndarray | None = None
         #: Receivers that see no opening (set by :meth:`balance`).
         self.closed_rows: np.ndarray | None = None
+        #: Every column computed and balanced (set by :meth:`balance`).
+        self.complete = False
         diag = scene_diagonal(mesh.positions)
         self.diagonal = diag
         self._points, self._origins = receiver_points(mesh, tol.ray_offset * diag)
@@ -192,6 +194,63 @@ class FormFactorEngine:
             self._cache[patch] = col
             self._cached_bytes += size
         return col
+
+    def pass_columns(self) -> dict[str, np.ndarray]:
+        """The columns of a form-factor pass cut short, packed as flat arrays for a
+        checkpoint (:meth:`restore_columns` reads them back); empty once every column is
+        computed. Only cached columns are kept."""
+        if self.complete:
+            return {}
+        order = [p for p in self._pass_order() if p in self._cache]
+        cols = [self._cache[p] for p in order]
+        gathers = [c.gather for c in cols]
+
+        def flat(values: list[np.ndarray], dtype: type) -> np.ndarray:
+            return np.concatenate(values) if values else np.zeros(0, dtype)
+
+        def lengths(values: list[np.ndarray]) -> np.ndarray:
+            return np.array([len(v) for v in values], dtype=np.int64)
+
+        return {
+            "patch": np.array(order, dtype=np.int64),
+            "length": lengths([c.receivers for c in cols]),
+            "receivers": flat([c.receivers for c in cols], np.int64),
+            "factors": flat([c.factors for c in cols], np.float64),
+            "near_length": lengths([g.receivers for g in gathers]),
+            "near_receivers": flat([g.receivers for g in gathers], np.int64),
+            "near_factors": flat([g.factors for g in gathers], np.float64),
+            "near_pointer": flat([g.pointer[1:] for g in gathers], np.int64),
+            "source_length": lengths([g.sources for g in gathers]),
+            "sources": flat([g.sources for g in gathers], np.int64),
+            "weights": flat([g.weights for g in gathers], np.float64),
+        }
+
+    def restore_columns(self, packed: dict[str, np.ndarray]) -> int:
+        """Cache the columns :meth:`pass_columns` packed (a resumed pass computes only the
+        others); their rays were cast by the earlier run and are not counted again.
+
+        Returns
+        -------
+        int, columns restored.
+        """
+        ends = {
+            name: np.concatenate([[0], np.cumsum(packed[name])])
+            for name in ("length", "near_length", "source_length")
+        }
+        for i, patch in enumerate(packed["patch"].tolist()):
+            a, b = ends["length"][i : i + 2]
+            g, h = ends["near_length"][i : i + 2]
+            u, v = ends["source_length"][i : i + 2]
+            gather = GatherWeights(
+                packed["near_receivers"][g:h],
+                packed["near_factors"][g:h],
+                np.concatenate([[0], packed["near_pointer"][g:h]]).astype(np.int64),
+                packed["sources"][u:v],
+                packed["weights"][u:v],
+            )
+            col = Column(packed["receivers"][a:b], packed["factors"][a:b], 0, gather)
+            self._store(patch, col)
+        return len(packed["patch"])
 
     def raw_columns(self, patches: Iterable[int]) -> Generator[tuple[int, Column], None, None]:
         """(patch, column before balancing) for ``patches`` in order, the missing ones
@@ -339,6 +398,7 @@ class FormFactorEngine:
         )
         self._row_scale = row_scale
         self._col_scale = col_scale
+        self.complete = True
         final = values * col_scale[owner] * row_scale[rows]
         self._final_rows = np.bincount(rows, weights=final, minlength=mesh.receiver_count)
         self.closed_rows = np.asarray(closed, dtype=bool)
@@ -352,7 +412,7 @@ class FormFactorEngine:
             "capture_excess": float(max(0.0, capture0.max(initial=0.0) - 1.0)),
             "column_excess": float(max(0.0, capture.max(initial=0.0) - 1.0)),
             "iterations": done,
-            "complete": True,
+            "complete": self.complete,
         }
 
     def row_sums(self) -> np.ndarray:

@@ -38,7 +38,7 @@ NEAR_FACTOR = 2.0
 #: twice beyond), not equally.
 SHARE_SIZES = 3.0
 #: Receiver-sample pairs per work chunk (bounds memory whatever the receiver count).
-PAIRS_PER_CHUNK = 1 << 15
+PAIRS_PER_CHUNK = 1 << 17
 
 
 class PairFactors:

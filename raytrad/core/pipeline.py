@@ -107,6 +107,7 @@ def prepare(
     mesh_settings: MeshSettings | None = None,
     cache_mb: float = defaults.cache_mb,
     stop: Callable[[], bool] | None = None,
+    columns: dict[str, np.ndarray] | None = None,
 ) -> Prepared:
     """Repair, mesh and balance ``scene``: everything before the first shot.
 
@@ -123,6 +124,9 @@ def prepare(
     stop : callable or None
         Polled during the form-factor pass (a time budget, Ctrl-C): True cuts it short
         (see :meth:`FormFactorEngine.balance`).
+    columns : dict or None
+        Columns of an earlier pass cut short (:meth:`FormFactorEngine.pass_columns`, from
+        a checkpoint): only the others are computed.
 
     Raises
     ------
@@ -151,6 +155,10 @@ def prepare(
             )
             mesh = hide_receivers(mesh, hidden)
         engine = FormFactorEngine(mesh, occluder, cache_bytes=int(cache_mb * (1 << 20)))
+        if columns:
+            log.info(
+                "form factors: %d columns from the checkpoint", engine.restore_columns(columns)
+            )
         balance = engine.balance(closed, _pass_progress(), stop=stop)
     if balance["complete"]:
         log.info(

@@ -119,7 +119,25 @@ class DiscreteSystem:
         return spread, peak
 
     def average(self, receivers: np.ndarray, values: np.ndarray) -> np.ndarray:
-        """``W[:, receivers] @ values``: patch means of per-receiver values ((K, 3) -> (P, 3))."""
+        """``W[:, receivers] @ values``: patch means of per-receiver values ((K, 3) -> (P, 3)).
+
+        Compiled when available; :meth:`numpy_average` is the reference."""
+        fast = compiled.get()
+        if fast is None:
+            return self.numpy_average(receivers, values)
+        return np.asarray(
+            fast.patch_average(
+                np.ascontiguousarray(receivers, dtype=np.int64),
+                np.ascontiguousarray(values, dtype=np.float64),
+                self.receiver_ptr,
+                self.entry_patch,
+                self.entry_weight,
+                len(self.patch_area),
+            )
+        )
+
+    def numpy_average(self, receivers: np.ndarray, values: np.ndarray) -> np.ndarray:
+        """:meth:`average` in numpy (the reference)."""
         start, stop = self.receiver_ptr[receivers], self.receiver_ptr[receivers + 1]
         counts = stop - start
         rows = np.repeat(np.arange(len(receivers)), counts)

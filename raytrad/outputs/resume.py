@@ -9,17 +9,24 @@ else is refused with one line saying what changed.
 
 from __future__ import annotations
 
+import logging
 import os
 from pathlib import Path
 from typing import Any
+
+import numpy as np
 
 from raytrad.core.solver import SolverState
 from raytrad.errors import RaytradError
 from raytrad.formats.checkpoint import read_checkpoint, write_checkpoint
 from raytrad.scene import Scene, scene_digests
 
+log = logging.getLogger(__name__)
+
 #: Version of the checkpoint layout; a checkpoint of another layout is refused.
 LAYOUT = 3
+#: Prefix of the arrays holding the columns of a form-factor pass cut short.
+PASS = "pass_"
 
 
 def fingerprint(scene: Scene, system_settings: dict[str, Any]) -> dict[str, Any]:
@@ -36,10 +43,77 @@ def fingerprint(scene: Scene, system_settings: dict[str, Any]) -> dict[str, Any]
     return {"layout": LAYOUT, "settings": _flat(system_settings), **scene_digests(scene)}
 
 
-def save_state(path: str | os.PathLike[str], state: SolverState, key: dict[str, Any]) -> None:
-    """Write ``state`` and its fingerprint ``key`` to ``path`` atomically."""
+def save_state(
+    path: str | os.PathLike[str],
+    state: SolverState,
+    key: dict[str, Any],
+    columns: dict[str, np.ndarray] | None = None,
+) -> None:
+    """Write ``state``, its fingerprint ``key`` and the ``columns`` of a form-factor pass
+    cut short (:meth:`~raytrad.core.formfactor.FormFactorEngine.pass_columns`) to ``path``
+    atomically."""
     arrays, scalars = state.to_record()
+    arrays |= {PASS + name: values for name, values in (columns or {}).items()}
     write_checkpoint(path, arrays, {"fingerprint": key, "scalars": scalars})
+
+
+def resume_point(
+    path: Path, key: dict[str, Any]
+) -> tuple[SolverState | None, dict[str, np.ndarray] | None]:
+    """What ``--resume`` continues from: the saved solver state and the columns of a
+    form-factor pass cut short ((None, None) without a checkpoint).
+
+    A state saved while the pass was incomplete is dropped (None): its shots went through
+    factors not yet balanced, so the solve starts again once the pass is done (those were
+    only the first, direct-light shots), and a resumed run gives the uninterrupted answer.
+
+    Raises
+    ------
+    RaytradError
+        As :func:`load_state`.
+    """
+    if not Path(path).exists():
+        return None, None
+    state = load_state(path, key)
+    columns = load_pass_columns(path)
+    if columns:
+        log.info("resuming the form-factor pass from %s: %d columns", path, len(columns["patch"]))
+        return None, columns
+    log.info("resuming from %s at shot %d", path, state.shots)
+    return state, None
+
+
+def load_pass_columns(path: str | os.PathLike[str]) -> dict[str, np.ndarray]:
+    """The form-factor columns :func:`save_state` stored in ``path`` ({} if none: the pass
+    was complete). Read after :func:`load_state` has checked the fingerprint."""
+    arrays, _ = read_checkpoint(path)
+    columns = {name[len(PASS) :]: a for name, a in arrays.items() if name.startswith(PASS)}
+    if columns and not _consistent(columns):
+        raise RaytradError(f"{path}: cannot read checkpoint (its form-factor columns are damaged)")
+    return columns
+
+
+#: Packed column arrays, and the length array that partitions each.
+_PARTS = {
+    "receivers": "length",
+    "factors": "length",
+    "near_receivers": "near_length",
+    "near_factors": "near_length",
+    "near_pointer": "near_length",
+    "sources": "source_length",
+    "weights": "source_length",
+}
+
+
+def _consistent(columns: dict[str, np.ndarray]) -> bool:
+    """Every packed array is there, partitioned exactly by its lengths, one per patch."""
+    names = {"patch", *_PARTS, *_PARTS.values()}
+    if not names <= set(columns) or any(columns[n].ndim != 1 for n in names):
+        return False
+    count = len(columns["patch"])
+    if any(len(columns[n]) != count or (columns[n] < 0).any() for n in set(_PARTS.values())):
+        return False
+    return all(len(columns[a]) == int(columns[n].sum()) for a, n in _PARTS.items())
 
 
 def load_state(path: str | os.PathLike[str], key: dict[str, Any]) -> SolverState:

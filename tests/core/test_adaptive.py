@@ -6,6 +6,7 @@ from __future__ import annotations
 from collections.abc import Callable
 
 import numpy as np
+import pytest
 
 from raytrad.core.adaptive import RefineSettings, refine_adaptively, subdivide
 from raytrad.core.pipeline import Prepared
@@ -89,3 +90,35 @@ def test_refinement_goes_to_shadow_edges_within_budget(
     assert back_middle.mean() < 0.02
     # the old receivers keep the solve's radiosity
     np.testing.assert_array_equal(out.radiosity[: mesh.receiver_count], result.radiosity)
+
+
+@pytest.mark.parametrize("extra", [1, 40])
+def test_the_receiver_budget_is_never_exceeded(
+    cornell_fine: tuple[Prepared, SolveResult], extra: int
+) -> None:
+    prepared, result = cornell_fine
+    budget = prepared.mesh.receiver_count + extra
+    out = refine_adaptively(
+        prepared.scene,
+        prepared.mesh,
+        prepared.engine,
+        prepared.occluder,
+        result.radiosity,
+        RefineSettings(max_receivers=budget),
+    )
+    assert out.mesh.receiver_count <= budget  # a split's closure splits neighbours too
+
+
+def test_a_budget_below_the_solved_receivers_says_so(
+    cornell_fine: tuple[Prepared, SolveResult], caplog: pytest.LogCaptureFixture
+) -> None:
+    prepared, result = cornell_fine
+    out = refine_adaptively(
+        prepared.scene,
+        prepared.mesh,
+        prepared.engine,
+        prepared.occluder,
+        result.radiosity,
+        RefineSettings(max_receivers=prepared.mesh.receiver_count - 10),
+    )
+    assert out.added == 0 and "no refinement: the receiver budget" in caplog.text
