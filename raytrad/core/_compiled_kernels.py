@@ -23,7 +23,8 @@ KERNELS = (
     "linear_corner_shares",
     "facing_triangle_sums",
     "sample_weights",
-    "segment_rays",
+    "_segment",
+    "visibility_rays",
     "patch_spread",
     "patch_average",
 )
@@ -185,29 +186,6 @@ def sample_weights(points, normals, samples, sample_normals, near_reach, area):
     return weight, far, near
 
 
-def segment_rays(origins, targets, shift, shorten):
-    """float32 rays from ``origins`` to ``targets``, both moved by ``-shift`` (see
-    :func:`raytrad.core.kernels.numpy_segment_rays`)."""
-    count = len(origins)
-    o = np.empty((count, 3), dtype=np.float32)
-    d = np.empty((count, 3), dtype=np.float32)
-    t = np.empty(count, dtype=np.float32)
-    for i in range(count):
-        dx = targets[i, 0] - origins[i, 0]
-        dy = targets[i, 1] - origins[i, 1]
-        dz = targets[i, 2] - origins[i, 2]
-        length = math.sqrt(dx * dx + dy * dy + dz * dz)
-        scale = length if length > 0.0 else 1.0
-        o[i, 0] = origins[i, 0] - shift[0]
-        o[i, 1] = origins[i, 1] - shift[1]
-        o[i, 2] = origins[i, 2] - shift[2]
-        d[i, 0] = dx / scale
-        d[i, 1] = dy / scale
-        d[i, 2] = dz / scale
-        t[i] = max(length - shorten, 0.0)
-    return o, d, t
-
-
 def patch_spread(
     entry_receiver,
     entry_patch,
@@ -245,3 +223,47 @@ def patch_average(receivers, values, receiver_ptr, entry_patch, entry_weight, pa
             out[p, 1] += w * values[i, 1]
             out[p, 2] += w * values[i, 2]
     return out
+
+
+def visibility_rays(origins, far, sub_targets, near_c, near_targets, shift, shorten):
+    """float32 rays of a chunk: first every far (receiver, sample) pair in row-major order
+    of ``far``, then the near ones (see :func:`raytrad.core.kernels.numpy_visibility_rays`)."""
+    far_count = 0
+    for c in range(far.shape[0]):
+        for s in range(far.shape[1]):
+            if far[c, s]:
+                far_count += 1
+    count = far_count + len(near_c)
+    o = np.empty((count, 3), dtype=np.float32)
+    d = np.empty((count, 3), dtype=np.float32)
+    t = np.empty(count, dtype=np.float32)
+    far_c = np.empty(far_count, dtype=np.int64)
+    far_s = np.empty(far_count, dtype=np.int64)
+    i = 0
+    for c in range(far.shape[0]):
+        for s in range(far.shape[1]):
+            if far[c, s]:
+                far_c[i] = c
+                far_s[i] = s
+                _segment(origins[c], sub_targets[s], shift, shorten, o[i], d[i], t, i)
+                i += 1
+    for k in range(len(near_c)):
+        _segment(origins[near_c[k]], near_targets[k], shift, shorten, o[i], d[i], t, i)
+        i += 1
+    return o, d, t, far_c, far_s
+
+
+def _segment(a, b, shift, shorten, o, d, t, i):
+    """One ray from ``a`` towards ``b``, written in place (``t[i]``, the rows ``o``, ``d``)."""
+    dx = b[0] - a[0]
+    dy = b[1] - a[1]
+    dz = b[2] - a[2]
+    length = math.sqrt(dx * dx + dy * dy + dz * dz)
+    scale = length if length > 0.0 else 1.0
+    o[0] = a[0] - shift[0]
+    o[1] = a[1] - shift[1]
+    o[2] = a[2] - shift[2]
+    d[0] = dx / scale
+    d[1] = dy / scale
+    d[2] = dz / scale
+    t[i] = max(length - shorten, 0.0)

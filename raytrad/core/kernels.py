@@ -434,41 +434,81 @@ def numpy_sample_weights(
     return weight, far, near
 
 
-def segment_rays(
-    origins: np.ndarray, targets: np.ndarray, shift: np.ndarray, shorten: float
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Rays along segments, compiled when available (see :func:`numpy_segment_rays`, the
-    reference)."""
+def visibility_rays(
+    origins: np.ndarray,
+    far: np.ndarray,
+    sub_targets: np.ndarray,
+    near_receivers: np.ndarray,
+    near_targets: np.ndarray,
+    shift: np.ndarray,
+    shorten: float,
+) -> tuple[np.ndarray, ...]:
+    """A chunk's occlusion rays, compiled when available (see
+    :func:`numpy_visibility_rays`, the reference)."""
     fast = compiled.get()
     if fast is None:
-        return numpy_segment_rays(origins, targets, shift, shorten)
-    return fast.segment_rays(_f64(origins), _f64(targets), _f64(shift), float(shorten))
+        return numpy_visibility_rays(
+            origins, far, sub_targets, near_receivers, near_targets, shift, shorten
+        )
+    return tuple(
+        fast.visibility_rays(
+            _f64(origins),
+            np.ascontiguousarray(far, dtype=np.bool_),
+            _f64(sub_targets),
+            np.ascontiguousarray(near_receivers, dtype=np.int64),
+            _f64(near_targets),
+            _f64(shift),
+            float(shorten),
+        )
+    )
 
 
-def numpy_segment_rays(
-    origins: np.ndarray, targets: np.ndarray, shift: np.ndarray, shorten: float
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Rays from ``origins`` towards ``targets`` for an occlusion query.
+def numpy_visibility_rays(
+    origins: np.ndarray,
+    far: np.ndarray,
+    sub_targets: np.ndarray,
+    near_receivers: np.ndarray,
+    near_targets: np.ndarray,
+    shift: np.ndarray,
+    shorten: float,
+) -> tuple[np.ndarray, ...]:
+    """The occlusion rays of a chunk: from each receiver's ray origin to each far sample
+    point it sees (row-major in ``far``), then to each near triangle's target.
 
     Parameters
     ----------
-    origins, targets : (N, 3) float64
-        Segment ends [m].
+    origins : (C, 3) float64
+        Ray origins of the chunk's receivers [m].
+    far : (C, S) bool
+        Far (receiver, sub-area sample) pairs.
+    sub_targets : (S, 3) float64
+        Sample ray targets [m].
+    near_receivers : (B,) int64
+        Chunk receiver of each near ray.
+    near_targets : (B, 3) float64
+        Its target [m].
     shift : (3,) float64
         Subtracted from the origins (to the ray tracer's local frame) [m].
     shorten : float
-        The segment stops this short of its target [m].
+        Each ray stops this short of its target [m].
 
     Returns
     -------
-    origin : (N, 3) float32 [m], direction : (N, 3) float32 (unit), reach : (N,) float32 [m]
+    origin : (A + B, 3) float32 [m]
+    direction : (A + B, 3) float32, unit
+    reach : (A + B,) float32 [m]
+    far_c, far_s : (A,) int64, receiver and sample of each far ray
     """
-    delta = targets - origins
+    far_c, far_s = np.nonzero(far)
+    start = origins[np.concatenate([far_c, near_receivers])]
+    delta = np.concatenate([sub_targets[far_s], near_targets]) - start
     length = np.sqrt(np.einsum("ij,ij->i", delta, delta))
     direction = delta / np.where(length > 0, length, 1.0)[:, None]
     reach = np.maximum(length - shorten, 0.0)
     return (
-        (origins - shift).astype(np.float32),
+        (start - shift).astype(np.float32),
         direction.astype(np.float32),
         reach.astype(np.float32),
+        far_c,
+        far_s,
     )

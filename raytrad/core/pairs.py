@@ -22,7 +22,7 @@ from raytrad.core.kernels import (
     linear_corner_shares,
     polygon_form_factor,
     sample_weights,
-    segment_rays,
+    visibility_rays,
     visible_centroid,
 )
 from raytrad.core.mesh import RadiosityMesh
@@ -101,15 +101,26 @@ class PairFactors:
                 return unoccluded, 0, EMPTY
             sees = close
         sub = m.patch_subareas(patch)
-        weight, far_c, far_s, near_c, near_tri, near_target, near_w, near_share = self._samples(
+        weight, far, near_c, near_tri, near_target, near_w, near_share = self._samples(
             x, nx, sees, sub
         )
-        who = np.concatenate([far_c, near_c])
-        blocked = np.zeros(len(who), dtype=bool)
         factors = unoccluded
-        if self.occluder is not None:
-            targets = np.concatenate([self._sub_target[sub][far_s], near_target])
-            blocked = self._blocked(origins[who], targets)
+        if self.occluder is None:
+            far_c, far_s = np.nonzero(far)
+            who = np.concatenate([far_c, near_c])
+            blocked = np.zeros(len(who), dtype=bool)
+        else:
+            o, d, t, far_c, far_s = visibility_rays(
+                origins,
+                far,
+                self._sub_target[sub],
+                near_c,
+                near_target,
+                self.occluder.origin,
+                0.5 * tol.ray_offset * self.diagonal,
+            )
+            who = np.concatenate([far_c, near_c])
+            blocked = self.occluder.occluded_local(o, d, t)
             total = weight.sum(axis=1) + np.bincount(near_c, weights=near_w, minlength=len(x))
             hidden = np.bincount(
                 who,
@@ -145,7 +156,7 @@ class PairFactors:
         Returns
         -------
         weight : (C, S) float64, disk factors of far samples (0 elsewhere)
-        far_c, far_s : (A,) int64, chunk receiver and patch-local sub-area of far samples
+        far : (C, S) bool, the far samples
         near_c, near_tri, near_target, near_w, near_share : (B,), (B,), (B, 3), (B,),
             (B, 3), chunk receiver, triangle, ray target [m], exact factor and corner
             shares of near triangles
@@ -165,9 +176,8 @@ class PairFactors:
         near &= sees[:, None]
         far &= sees[:, None]
         weight[~sees] = 0.0
-        far_c, far_s = np.nonzero(far)
         near_c, near_tri, near_target, near_w, near_share = self._near_field(x, nx, near, sub)
-        return weight, far_c, far_s, near_c, near_tri, near_target, near_w, near_share
+        return weight, far, near_c, near_tri, near_target, near_w, near_share
 
     def _unoccluded(self, x: np.ndarray, nx: np.ndarray, patch: int) -> np.ndarray:
         """Exact unoccluded F(receiver <- patch).
@@ -265,9 +275,3 @@ class PairFactors:
                     corners[part], x[cc[part]], nx[cc[part]], levels
                 )
         return cc, tri, target, f[keep], shares
-
-    def _blocked(self, origins: np.ndarray, targets: np.ndarray) -> np.ndarray:
-        assert self.occluder is not None
-        shorten = 0.5 * tol.ray_offset * self.diagonal
-        o, d, t = segment_rays(origins, targets, self.occluder.origin, shorten)
-        return self.occluder.occluded_local(o, d, t)

@@ -130,19 +130,21 @@ def test_sample_weights_agree_with_numpy():
     assert got[1].any() and got[2].any()
 
 
-def test_segment_rays_agree_with_numpy():
+def test_visibility_rays_agree_with_numpy():
     rng = np.random.default_rng(6)
-    a = rng.normal(size=(1000, 3)) * 1e3
-    b = a + rng.normal(size=(1000, 3))
-    b[:10] = a[:10]  # zero-length segments
+    origins = rng.normal(size=(40, 3)) * 1e3
+    far = rng.random((40, 12)) < 0.5
+    targets = origins[:12] + rng.normal(size=(12, 3))
+    targets[0] = origins[0]  # a zero-length ray
+    near_c = rng.integers(0, 40, 25)
+    near_targets = origins[near_c] + rng.normal(size=(25, 3))
     shift = np.array([1e3, -2e3, 5.0])
-    for got, want in zip(
-        kernels.segment_rays(a, b, shift, 1e-4),
-        kernels.numpy_segment_rays(a, b, shift, 1e-4),
-        strict=True,
-    ):
-        assert got.dtype == want.dtype == np.float32
-        np.testing.assert_array_equal(got, want)
+    got = kernels.visibility_rays(origins, far, targets, near_c, near_targets, shift, 1e-4)
+    want = kernels.numpy_visibility_rays(origins, far, targets, near_c, near_targets, shift, 1e-4)
+    for g, w in zip(got, want, strict=True):
+        assert g.dtype == w.dtype
+        np.testing.assert_array_equal(g, w)
+    assert len(got[0]) == far.sum() + 25
 
 
 def test_numpy_kernels_on_request(monkeypatch):
