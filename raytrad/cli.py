@@ -517,6 +517,10 @@ def _render(args: argparse.Namespace) -> int:
     return 130 if outcome.result.stop_reason == "interrupted" else 0
 
 
+def _share(part: int, whole: int) -> str:
+    return f"{100.0 * part / whole:.0f}%" if whole else "-"
+
+
 def _print_summary(report: dict[str, Any], outputs: dict[str, Path]) -> None:
     s, stats, t = report["solve"], report["statistics"], report["timings_seconds"]
     total = sum(t.values())
@@ -526,7 +530,11 @@ def _print_summary(report: dict[str, Any], outputs: dict[str, Path]) -> None:
         f"solve      {s['method']}: {s['stop_reason']} after {s['shots']} shots, "
         f"residual {s['residual']:.2e}",
         f"rays       {s['rays']} ({s['rays_per_second']:.3g} rays/s"
-        + ("" if stats["occlusion_tested"] else "; nothing can occlude, no rays needed")
+        + (
+            f"; {_share(s['rays'], s['rays_naive'])} of {s['rays_naive']} without culling"
+            if stats["occlusion_tested"]
+            else "; nothing can occlude, no rays needed"
+        )
         + ")",
         "time       " + ", ".join(f"{k} {v:.2f}s" for k, v in t.items()) + f"; total {total:.2f}s",
     ]

@@ -5,11 +5,16 @@ Three tables:
 
 1. **Pass against raw Embree.** The Cornell box's form-factor pass (every column, as
    ``raytrad render`` computes it before the first shot) is timed with its rays
-   recorded; the same rays are then replayed through embreex's occlusion query, with the
-   same threads, in the same process. Effective rays/s = rays / pass seconds.
-2. **Compiled against numpy kernels.** The same pass with ``RAYTRAD_KERNELS=numpy`` (the
-   numpy reference kernels) in the same process, and the check that both give the same
-   factors.
+   recorded, with shaft culling (the default) and tracing every pair; each pass's rays
+   are then replayed through embreex's occlusion query, with the same threads, in the
+   same process. The last column sets each pass against raw Embree doing the unculled
+   pass's job: above 100% the pass finishes the job faster than Embree alone traces it.
+   ``rays / naive`` sets rays cast against receivers x samples of the pairs that see
+   each other.
+2. **Compiled against numpy kernels; the solve.** The same pass with
+   ``RAYTRAD_KERNELS=numpy`` (the numpy reference kernels) in the same process, and the
+   check that every variant gives the same factors; then a default solve over the cached
+   columns with the compiled shot and with ``numpy_shoot``, against the pass time.
 3. **Whole renders and scale.** ``raytrad render`` of the bundled Cornell box at each
    ``--receivers``, as a child process: seconds per stage from ``report.json``, shots,
    rays and peak memory; with ``--previous RAYTRAD`` (the ``raytrad`` executable of
@@ -24,6 +29,7 @@ Three tables:
 from __future__ import annotations
 
 import argparse
+import functools
 import json
 import os
 import subprocess
@@ -37,6 +43,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
+from raytrad.core import pipeline, solver  # noqa: E402
 from raytrad.core.mesh import MeshSettings  # noqa: E402
 from raytrad.core.pipeline import prepare  # noqa: E402
 from raytrad.core.visibility import Occluder  # noqa: E402
@@ -50,7 +57,7 @@ _MEASURE = (
 )
 
 
-def timed_pass(receivers: int, record: bool) -> tuple[float, object, list]:
+def timed_pass(receivers: int, record: bool, cull: bool = True) -> tuple[float, object, list]:
     """(seconds of the form-factor pass, the prepared scene, recorded ray batches)."""
     batches: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
     original = Occluder.occluded_local
@@ -61,10 +68,13 @@ def timed_pass(receivers: int, record: bool) -> tuple[float, object, list]:
         return original(self, o, d, t)
 
     Occluder.occluded_local = recording  # type: ignore[method-assign]
+    engine = pipeline.FormFactorEngine
+    pipeline.FormFactorEngine = functools.partial(engine, cull=cull)  # type: ignore[misc]
     try:
         prepared = prepare(cornell_box(), MeshSettings(receivers=receivers))
     finally:
         Occluder.occluded_local = original  # type: ignore[method-assign]
+        pipeline.FormFactorEngine = engine  # type: ignore[misc]
     return prepared.timings["form_factors"], prepared, batches
 
 
@@ -86,6 +96,27 @@ def replay(occluder: Occluder, batches: list) -> tuple[float, int]:
     return time.perf_counter() - start, rays
 
 
+def _worst(prepared: object, factors: list[np.ndarray]) -> float:
+    """Largest difference of ``prepared``'s factors from ``factors`` (every 7th column)."""
+    patches = range(0, prepared.mesh.patch_count, 7)  # type: ignore[attr-defined]
+    return max(
+        float(np.abs(_dense(prepared.engine, p) - f).max())  # type: ignore[attr-defined]
+        for p, f in zip(patches, factors, strict=True)
+    )
+
+
+def _solve_seconds(prepared: object, shoot: object) -> tuple[float, int]:
+    """(seconds, shots) of a default solve over the prepared columns with ``shoot``."""
+    original = solver._shoot
+    solver._shoot = shoot  # type: ignore[assignment]
+    try:
+        start = time.perf_counter()
+        result = solver.solve(prepared.mesh, prepared.engine)  # type: ignore[attr-defined]
+        return time.perf_counter() - start, result.state.shots
+    finally:
+        solver._shoot = original  # type: ignore[assignment]
+
+
 def pass_table(receivers: int) -> None:
     from raytrad.core import compiled
 
@@ -94,41 +125,54 @@ def pass_table(receivers: int) -> None:
     seconds, prepared, batches = timed_pass(receivers, record=True)
     try:
         embree, rays = replay(prepared.occluder, batches)
+        naive = prepared.engine.rays_naive
         factors = [_dense(prepared.engine, p) for p in range(0, prepared.mesh.patch_count, 7)]
+        solve_fast, shots = _solve_seconds(prepared, solver._shoot)
+        solve_numpy, _ = _solve_seconds(prepared, solver.numpy_shoot)
     finally:
         prepared.close()
+    every_seconds, every, every_batches = timed_pass(receivers, record=True, cull=False)
+    try:
+        every_embree, every_rays = replay(every.occluder, every_batches)
+        every_worst = _worst(every, factors)
+    finally:
+        every.close()
+    del every_batches
     os.environ["RAYTRAD_KERNELS"] = "numpy"
     try:
         numpy_seconds, reference, _ = timed_pass(receivers, record=False)
-        patches = range(0, reference.mesh.patch_count, 7)
-        worst = max(
-            float(np.abs(_dense(reference.engine, p) - f).max())
-            for p, f in zip(patches, factors, strict=True)
-        )
+        worst = _worst(reference, factors)
         reference.close()
     finally:
         del os.environ["RAYTRAD_KERNELS"]
     print(
         f"\nform-factor pass, Cornell box, --receivers {receivers} "
-        f"({prepared.mesh.receiver_count} receivers)"
+        f"({prepared.mesh.receiver_count} receivers, {prepared.mesh.patch_count} patches; "
+        f"naive count receivers x samples: {naive:.3g} rays)"
     )
-    print("| pass | seconds | rays | rays/s | share of raw Embree |")
+    print("| pass | seconds | rays | rays / naive | raw Embree on every ray / pass |")
     print("|---|---|---|---|---|")
+    rows = [
+        ("raw embreex occlusion, every ray of the unculled pass", every_embree, every_rays),
+        ("raw embreex occlusion, the culled pass's rays", embree, rays),
+        ("raytrad pass, every pair traced (no shaft culling)", every_seconds, every_rays),
+        ("raytrad pass, shaft culling (default)", seconds, rays),
+        ("raytrad pass, shaft culling, numpy kernels", numpy_seconds, rays),
+    ]
+    for name, took, count in rows:
+        print(
+            f"| {name} | {took:.2f} | {count:.3g} | {count / naive:.2f} | "
+            f"{100 * every_embree / took:.0f}% |"
+        )
     print(
-        f"| raw embreex occlusion, same rays | {embree:.2f} | {rays:.3g} | "
-        f"{rays / embree:.3g} | 100% |"
+        f"culled / unculled pass time: {seconds / every_seconds:.2f}; compiled / numpy: "
+        f"{seconds / numpy_seconds:.2f}; largest factor difference (every 7th column) "
+        f"unculled {every_worst:.1e}, numpy kernels {worst:.1e}"
     )
     print(
-        f"| raytrad pass, compiled kernels | {seconds:.2f} | {rays:.3g} | {rays / seconds:.3g} "
-        f"| {100 * embree / seconds:.0f}% |"
-    )
-    print(
-        f"| raytrad pass, numpy kernels | {numpy_seconds:.2f} | {rays:.3g} | "
-        f"{rays / numpy_seconds:.3g} | {100 * embree / numpy_seconds:.0f}% |"
-    )
-    print(
-        f"compiled / numpy time: {seconds / numpy_seconds:.2f}; largest factor difference "
-        f"(every 7th column): {worst:.1e}"
+        f"\nsolve over the cached columns ({shots} shots): compiled shot {solve_fast:.2f} s "
+        f"({100 * solve_fast / seconds:.0f}% of the pass), numpy shot {solve_numpy:.2f} s "
+        f"({100 * solve_numpy / seconds:.0f}%); compiled / numpy {solve_fast / solve_numpy:.2f}"
     )
 
 
@@ -204,10 +248,12 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--previous", default=None, help="another install's raytrad executable")
     parser.add_argument("--runs", type=int, default=1, help="renders per size and install")
     parser.add_argument("--no-pass", action="store_true", help="skip the pass tables")
+    parser.add_argument("--no-renders", action="store_true", help="skip the render table")
     args = parser.parse_args(argv)
     if not args.no_pass:
         pass_table(args.receivers[0])
-    render_table(args.receivers, args.previous, args.runs)
+    if not args.no_renders:
+        render_table(args.receivers, args.previous, args.runs)
     return 0
 
 

@@ -27,6 +27,11 @@ KERNELS = (
     "visibility_rays",
     "patch_spread",
     "patch_average",
+    "_outside_pyramid",
+    "shaft_clear",
+    "shoot",
+    "_row_scales",
+    "sinkhorn_columns",
 )
 
 
@@ -267,3 +272,276 @@ def _segment(a, b, shift, shorten, o, d, t, i):
     d[1] = dy / scale
     d[2] = dz / scale
     t[i] = max(length - shorten, 0.0)
+
+
+def shaft_clear(
+    origins,
+    sides,
+    patch_sides,
+    normals,
+    offsets,
+    centers,
+    radii,
+    hull,
+    hull_ptr,
+    band,
+    patch_center,
+    patch_reach,
+):
+    """Receivers whose shaft to a patch no facet can block (see
+    :func:`raytrad.core.kernels.numpy_shaft_clear`): per receiver, the candidate facets are
+    a few word operations on packed side bits; only those get the capsule and pyramid
+    tests."""
+    count = len(radii)
+    words = sides.shape[1] // 2
+    tail = count - 64 * (words - 1)
+    last = np.uint64(0xFFFFFFFFFFFFFFFF)
+    if tail < 64:
+        last = (np.uint64(1) << np.uint64(tail)) - np.uint64(1)
+    out = np.ones(origins.shape[0], dtype=np.bool_)
+    for c in range(origins.shape[0]):
+        ox, oy, oz = origins[c, 0], origins[c, 1], origins[c, 2]
+        dx = patch_center[0] - ox
+        dy = patch_center[1] - oy
+        dz = patch_center[2] - oz
+        length2 = dx * dx + dy * dy + dz * dz
+        for w in range(words):
+            same = (sides[c, w] & patch_sides[w]) | (sides[c, words + w] & patch_sides[words + w])
+            cand = ~same
+            if w == words - 1:
+                cand &= last
+            while cand != np.uint64(0):
+                low = cand & (~cand + np.uint64(1))
+                cand ^= low
+                q = 64 * w + int(math.log2(float(low)))
+                px = centers[q, 0] - ox
+                py = centers[q, 1] - oy
+                pz = centers[q, 2] - oz
+                t = 0.0
+                if length2 > 0.0:
+                    t = min(max((px * dx + py * dy + pz * dz) / length2, 0.0), 1.0)
+                ex = px - t * dx
+                ey = py - t * dy
+                ez = pz - t * dz
+                reach = radii[q] + patch_reach
+                if ex * ex + ey * ey + ez * ez > reach * reach:
+                    continue
+                height = normals[q, 0] * ox + normals[q, 1] * oy + normals[q, 2] * oz - offsets[q]
+                if not _outside_pyramid(
+                    ox,
+                    oy,
+                    oz,
+                    height,
+                    band,
+                    hull,
+                    hull_ptr[q],
+                    hull_ptr[q + 1],
+                    dx,
+                    dy,
+                    dz,
+                    patch_reach,
+                ):
+                    out[c] = False
+                    break
+            if not out[c]:
+                break
+    return out
+
+
+def _outside_pyramid(ox, oy, oz, height, band, hull, a, b, dx, dy, dz, reach):
+    """Whether the ball (o + d, reach) lies wholly outside one side plane of the pyramid
+    from ``o`` through the hull ``hull[a:b]`` (counter-clockwise about the facet normal)."""
+    if abs(height) <= band or b - a < 3:
+        return False
+    sign = -1.0 if height > 0.0 else 1.0
+    for k in range(a, b):
+        j = k + 1 if k + 1 < b else a
+        ax = hull[k, 0] - ox
+        ay = hull[k, 1] - oy
+        az = hull[k, 2] - oz
+        bx = hull[j, 0] - ox
+        by = hull[j, 1] - oy
+        bz = hull[j, 2] - oz
+        nx = sign * (ay * bz - az * by)
+        ny = sign * (az * bx - ax * bz)
+        nz = sign * (ax * by - ay * bx)
+        norm = math.sqrt(nx * nx + ny * ny + nz * nz)
+        if nx * dx + ny * dy + nz * dz < -reach * norm:
+            return True
+    return False
+
+
+def shoot(
+    entries,
+    entry_receiver,
+    entry_weight,
+    emission,
+    reflectance,
+    irradiance,
+    entry_shot,
+    amount,
+    receivers,
+    factors,
+    near_receivers,
+    near_pointer,
+    near_sources,
+    near_weights,
+    area,
+    receiver_ptr,
+    entry_patch,
+    patch_radiosity,
+    scratch,
+):
+    """One shot through a cached column, in place (see
+    :func:`raytrad.core.solver.numpy_shoot`, the reference, for the steps). Returns the
+    power caught by the receivers, the power they reflect ((3,) each, [W]) and
+    ``sum_j a_j F_jp`` [m2]."""
+    n = len(entries)
+    own = np.empty((n, 3))
+    mean = np.zeros(3)
+    for i in range(n):
+        e = entries[i]
+        k = entry_receiver[e]
+        for c in range(3):
+            own[i, c] = emission[k, c] + reflectance[k, c] * irradiance[k, c] - entry_shot[e, c]
+            mean[c] += entry_weight[e] * own[i, c]
+    for i in range(n):
+        e = entries[i]
+        k = entry_receiver[e]
+        for c in range(3):
+            value = own[i, c] + (amount[c] - mean[c])
+            entry_shot[e, c] += value
+            scratch[k, c] = value
+    count = len(receivers)
+    received = np.empty((count, 3))
+    for r in range(count):
+        for c in range(3):
+            received[r, c] = factors[r] * amount[c]
+    near_count = len(near_receivers)
+    if near_count:
+        near = np.empty(near_count, dtype=np.int64)
+        r = 0
+        for g in range(near_count):  # both ascending
+            while receivers[r] != near_receivers[g]:
+                r += 1
+            near[g] = r
+        excess = np.zeros(3)
+        for g in range(near_count):
+            r = near[g]
+            seen = np.zeros(3)
+            for s in range(near_pointer[g], near_pointer[g + 1]):
+                for c in range(3):
+                    seen[c] += near_weights[s] * scratch[near_sources[s], c]
+            a = area[receivers[r]]
+            for c in range(3):
+                received[r, c] = factors[r] * seen[c]
+                excess[c] += a * (received[r, c] - factors[r] * amount[c])
+        is_near = np.zeros(count, dtype=np.bool_)
+        for g in range(near_count):
+            is_near[near[g]] = True
+        caught = 0.0
+        for r in range(count):
+            if not is_near[r]:
+                caught += area[receivers[r]] * factors[r]
+        target_near = not caught > 0.0
+        if target_near:
+            caught = 0.0
+            for g in range(near_count):
+                caught += area[receivers[near[g]]] * factors[near[g]]
+        if caught > 0.0:
+            for r in range(count):
+                if is_near[r] == target_near:
+                    for c in range(3):
+                        received[r, c] -= factors[r] * (excess[c] / caught)
+        for i in range(n):
+            k = entry_receiver[entries[i]]
+            for c in range(3):
+                scratch[k, c] = 0.0
+    else:
+        for i in range(n):
+            k = entry_receiver[entries[i]]
+            for c in range(3):
+                scratch[k, c] = 0.0
+    power = np.zeros(3)
+    reflected = np.zeros(3)
+    capture = 0.0
+    for r in range(count):
+        k = receivers[r]
+        a = area[k]
+        capture += a * factors[r]
+        for c in range(3):
+            value = received[r, c]
+            irradiance[k, c] += value
+            bounce = reflectance[k, c] * value
+            power[c] += a * value
+            reflected[c] += a * bounce
+            for e in range(receiver_ptr[k], receiver_ptr[k + 1]):
+                patch_radiosity[entry_patch[e], c] += entry_weight[e] * bounce
+    return power, reflected, capture
+
+
+def _row_scales(pointer, rows, values, col_scale, fixed_rows, out):
+    """Row scales holding the fixed rows of ``F diag(col_scale)`` to a sum of 1, in place
+    (see :func:`raytrad.core.balance._row_scales`)."""
+    out[:] = 0.0
+    for p in range(len(pointer) - 1):
+        for k in range(pointer[p], pointer[p + 1]):
+            out[rows[k]] += values[k] * col_scale[p]
+    for j in range(len(out)):
+        if fixed_rows[j] and out[j] > 0.0:
+            out[j] = 1.0 / max(out[j], 1e-300)
+        else:
+            out[j] = 1.0
+
+
+def sinkhorn_columns(
+    pointer,
+    rows,
+    values,
+    receiver_area,
+    patch_area,
+    fixed_rows,
+    closed_columns,
+    iterations,
+    converged,
+):
+    """:func:`raytrad.core.balance.sinkhorn` over columns stored end to end (CSR by patch),
+    with no per-entry temporaries; also the captures before and after and the balanced row
+    sums (see :func:`raytrad.core.balance.balance_columns`)."""
+    total = len(patch_area)
+    col_scale = np.ones(total)
+    row_scale = np.ones(len(receiver_area))
+    capture0 = np.zeros(total)
+    for p in range(total):
+        for k in range(pointer[p], pointer[p + 1]):
+            capture0[p] += receiver_area[rows[k]] * values[k]
+        capture0[p] /= patch_area[p]
+    done = 0
+    while done < iterations:
+        done += 1
+        _row_scales(pointer, rows, values, col_scale, fixed_rows, row_scale)
+        change = 0.0
+        for p in range(total):
+            capture = 0.0
+            for k in range(pointer[p], pointer[p + 1]):
+                j = rows[k]
+                capture += receiver_area[j] * values[k] * row_scale[j]
+            capture /= patch_area[p]
+            new = 1.0
+            if capture > 1.0 or closed_columns[p]:
+                new = 1.0 / capture
+            change = max(change, abs(new / col_scale[p] - 1.0))
+            col_scale[p] = new
+        if change < converged:
+            break
+    _row_scales(pointer, rows, values, col_scale, fixed_rows, row_scale)
+    final_rows = np.zeros(len(receiver_area))
+    capture = np.zeros(total)
+    for p in range(total):
+        for k in range(pointer[p], pointer[p + 1]):
+            j = rows[k]
+            final = values[k] * col_scale[p] * row_scale[j]
+            final_rows[j] += final
+            capture[p] += receiver_area[j] * final
+        capture[p] /= patch_area[p]
+    return row_scale, col_scale, done, capture0, capture, final_rows

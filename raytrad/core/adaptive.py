@@ -98,6 +98,10 @@ class Refinement:
         Relative RMS (area-weighted) of what the new receivers' gathered radiosity
         changed against the interpolation it replaced [1]: the discretisation error the
         refinement found.
+    rays, rays_naive : int
+        Visibility rays the new receivers' gathers cast, and the rays an unclassified
+        caster would have cast (see
+        :attr:`~raytrad.core.formfactor.FormFactorEngine.rays_naive`).
     """
 
     mesh: RadiosityMesh
@@ -106,6 +110,8 @@ class Refinement:
     rounds: int = 0
     by_object: dict[str, int] = field(default_factory=dict)
     change_rms: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    rays: int = 0
+    rays_naive: int = 0
 
 
 def refine_adaptively(
@@ -179,6 +185,8 @@ def refine_adaptively(
             )
         finally:
             near.close()
+        out.rays += near.rays_cast
+        out.rays_naive += near.rays_naive
         changes.append((before - gathered, refined.receiver_area[new]))
         out.radiosity = np.concatenate([out.radiosity, gathered])
         out.mesh = refined

@@ -29,7 +29,7 @@ from typing import TypeVar
 import numpy as np
 
 from raytrad.constants import scene_diagonal, tol
-from raytrad.core.balance import BALANCE_ITERATIONS, Sparse, closed_patches, sinkhorn
+from raytrad.core.balance import BALANCE_ITERATIONS, balance_columns, closed_patches
 from raytrad.core.gather import (
     EMPTY,
     GatherRows,
@@ -83,10 +83,15 @@ class Column:
 
     Attributes
     ----------
-    receivers : (K,) int64
+    receivers : (K,) int32 (int64 beyond 2**31 receivers)
         Receivers with a non-zero factor, ascending.
-    factors : (K,) float64
-        F(receiver <- patch) [1].
+    factors : (K,) float32 (raw) or float64 (balanced)
+        F(receiver <- patch) [1]. Raw columns are stored in float32: float32's relative
+        rounding, 6e-8, is far below the sampled visibility's error, and it cannot leak
+        energy, because balancing computes its row and column scales (float64) from the
+        stored values themselves, so closed rows still sum to 1 and closed patches still
+        capture 1 to float64 rounding. Balanced columns (:meth:`FormFactorEngine.column`)
+        are float64.
     rays : int
         Visibility rays cast to compute it.
     gather : GatherWeights
@@ -115,10 +120,21 @@ class FormFactorEngine:
         None when nothing in the scene can block light (a convex enclosure): no rays.
     cache_bytes : int
         Memory for cached columns; a column is computed once and reused while it fits.
+    cull : bool
+        Trace only the (receiver, patch) pairs whose shaft an occluder may cross
+        (:mod:`raytrad.core.shafts`); False traces every pair (the tests' reference).
+    pairs : PairFactors or None
+        The pair tables of the engine whose mesh ``mesh`` refines (see :meth:`refined`):
+        what does not change under refinement is carried over.
     """
 
     def __init__(
-        self, mesh: RadiosityMesh, occluder: Occluder | None, cache_bytes: int = 1 << 30
+        self,
+        mesh: RadiosityMesh,
+        occluder: Occluder | None,
+        cache_bytes: int = 1 << 30,
+        cull: bool = True,
+        pairs: PairFactors | None = None,
     ) -> None:
         self.mesh = mesh
         self.occluder = occluder
@@ -143,8 +159,32 @@ class FormFactorEngine:
         diag = scene_diagonal(mesh.positions)
         self.diagonal = diag
         self._points, self._origins = receiver_points(mesh, tol.ray_offset * diag)
-        self._pairs = PairFactors(mesh, occluder, diag)
+        self.cull = cull
+        self._pairs = (
+            PairFactors(mesh, occluder, diag, cull) if pairs is None else pairs.refined(mesh)
+        )
+        self._receiver_sides: np.ndarray | None = None
+        #: Column receiver indices: int32 while they fit (a third less memory per entry).
+        self._index = np.int32 if mesh.receiver_count < 2**31 else np.int64
+        self._sides_lock = threading.Lock()
         self._gathers: dict[int, GatherWeights] = {}  # kept even when columns are not
+
+    @property
+    def _sides(self) -> np.ndarray | None:
+        """Packed facet side bits of the receivers' ray origins (computed once, on first
+        use; None when the pass is not culled)."""
+        if self._pairs.facets is None:
+            return None
+        with self._sides_lock:
+            if self._receiver_sides is None:
+                self._receiver_sides = self._pairs.sides(self._origins)
+        return self._receiver_sides
+
+    @property
+    def rays_naive(self) -> int:
+        """Rays an unclassified vertex-to-patch caster would have cast for the same work:
+        (receiver, patch) pairs that see each other x the patch's sample points."""
+        return self._pairs.naive_rays
 
     def close(self) -> None:
         if self._pool is not None:
@@ -153,10 +193,10 @@ class FormFactorEngine:
 
     def column(self, patch: int) -> Column:
         """F(receiver <- patch) for every receiver that can see it (balanced, see
-        :meth:`balance`, once that has run)."""
+        :meth:`balance`, once that has run), in float64."""
         col = self._raw_column(patch)
         if self._row_scale is None:
-            return col
+            return Column(col.receivers, col.factors.astype(np.float64), col.rays, col.gather)
         scale = self._row_scale[col.receivers] * self._col_scale[patch]
         return Column(col.receivers, col.factors * scale, col.rays, col.gather)
 
@@ -248,7 +288,8 @@ class FormFactorEngine:
                 packed["sources"][u:v],
                 packed["weights"][u:v],
             )
-            col = Column(packed["receivers"][a:b], packed["factors"][a:b], 0, gather)
+            receivers = packed["receivers"][a:b].astype(self._index)
+            col = Column(receivers, packed["factors"][a:b].astype(np.float32), 0, gather)
             self._store(patch, col)
         return len(packed["patch"])
 
@@ -381,29 +422,30 @@ class FormFactorEngine:
         if closed is None:
             closed = np.abs(sums - 1.0) < EXACT_ROW_SUM
         fix_rows = closed & (np.abs(sums - 1.0) < ROW_FIX_LIMIT) & (sums > 0)
-        lengths = np.array([len(c.receivers) for c in columns])
+        lengths = np.array([len(c.receivers) for c in columns], dtype=np.int64)
+        pointer = np.concatenate([[0], np.cumsum(lengths)]).astype(np.int64)
         rows = np.concatenate([c.receivers for c in columns]) if total else np.zeros(0, int)
         values = np.concatenate([c.factors for c in columns]) if total else np.zeros(0)
-        owner = np.repeat(np.arange(total), lengths)
-        area = mesh.receiver_area[rows]
         closed_patch = closed_patches(mesh, fix_rows)
-        capture0 = np.bincount(owner, weights=area * values, minlength=total) / mesh.patch_area
-        row_scale, col_scale, done = sinkhorn(
-            Sparse(rows, owner, values, mesh.receiver_count, total),
-            area,
+        found = balance_columns(
+            pointer,
+            rows,
+            values,
+            mesh.receiver_area,
             mesh.patch_area,
             fix_rows,
             closed_patch,
             iterations,
         )
+        del rows, values
+        row_scale, col_scale, done = found.row_scale, found.column_scale, found.iterations
+        capture0, capture = found.capture_before, found.capture_after
         self._row_scale = row_scale
         self._col_scale = col_scale
         self.complete = True
-        final = values * col_scale[owner] * row_scale[rows]
-        self._final_rows = np.bincount(rows, weights=final, minlength=mesh.receiver_count)
+        self._final_rows = found.row_sums
         self.closed_rows = np.asarray(closed, dtype=bool)
         self.max_row_sum = float(self._final_rows.max(initial=0.0))
-        capture = np.bincount(owner, weights=area * final, minlength=total) / mesh.patch_area
         return {
             "closed_rows": int(fix_rows.sum()),
             "closed_columns": int(closed_patch.sum()),
@@ -442,6 +484,7 @@ class FormFactorEngine:
             self.mesh.receiver_normal[candidates],
             self._origins[candidates],
             patch,
+            None if self._sides is None else self._sides[candidates],
         )
         keep = factors > 0
         gather = gather.subset(keep[gather.receivers])
@@ -452,13 +495,17 @@ class FormFactorEngine:
             gather.sources,
             gather.weights,
         )
-        return Column(candidates[keep], factors[keep], rays, gather)
+        return Column(
+            candidates[keep].astype(self._index), factors[keep].astype(np.float32), rays, gather
+        )
 
     def refined(self, mesh: RadiosityMesh) -> FormFactorEngine:
         """An engine on a refinement of this one's mesh (the same patches and sub-areas,
         finer triangles and more receivers), with this one's balanced column scales, for
         gathering at new receivers (:meth:`gather_at`). It caches no column."""
-        engine = FormFactorEngine(mesh, self.occluder, cache_bytes=0)
+        engine = FormFactorEngine(
+            mesh, self.occluder, cache_bytes=0, cull=self.cull, pairs=self._pairs
+        )
         engine._col_scale = self._col_scale.copy()
         return engine
 
@@ -501,11 +548,13 @@ class FormFactorEngine:
         points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
         normals = np.asarray(normals, dtype=np.float64).reshape(-1, 3)
         origins = points + tol.ray_offset * self.diagonal * normals
+        sides = self._pairs.sides(origins)
         rows = GatherRows(len(points), np.zeros(len(points)), [])
 
         def work(patch: int) -> tuple[np.ndarray, tuple[np.ndarray, int, GatherWeights]]:
             near = self._candidates(patch, points, normals)
-            return near, self._factors(points[near], normals[near], origins[near], patch)
+            part = None if sides is None else sides[near]
+            return near, self._factors(points[near], normals[near], origins[near], patch, part)
 
         patches = list(range(self.mesh.patch_count))
         for patch, (near, (factors, rays, gather)) in zip(
@@ -536,10 +585,15 @@ class FormFactorEngine:
         points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
         normals = np.asarray(normals, dtype=np.float64).reshape(-1, 3)
         origins = points + tol.ray_offset * self.diagonal * normals
-        return self._factors(points, normals, origins, patch)[0]
+        return self._factors(points, normals, origins, patch, self._pairs.sides(origins))[0]
 
     def _factors(
-        self, x: np.ndarray, nx: np.ndarray, origins: np.ndarray, patch: int
+        self,
+        x: np.ndarray,
+        nx: np.ndarray,
+        origins: np.ndarray,
+        patch: int,
+        sides: np.ndarray | None,
     ) -> tuple[np.ndarray, int, GatherWeights]:
         if len(x) == 0:
             return np.zeros(0), 0, EMPTY
@@ -549,7 +603,8 @@ class FormFactorEngine:
 
         def work(span: tuple[int, int]) -> tuple[np.ndarray, int, GatherWeights]:
             a, b = span
-            return self._pairs.chunk(x[a:b], nx[a:b], origins[a:b], patch)
+            part = None if sides is None else sides[a:b]
+            return self._pairs.chunk(x[a:b], nx[a:b], origins[a:b], patch, part)
 
         if len(spans) == 1 or worker_count() == 1 or _WORKER.active:
             parts = [work(s) for s in spans]

@@ -12,6 +12,10 @@ weights, :mod:`raytrad.core.gather`). The per-pair loops run compiled
 
 from __future__ import annotations
 
+import copy
+import itertools
+import threading
+
 import numpy as np
 
 from raytrad.constants import tol
@@ -27,6 +31,7 @@ from raytrad.core.kernels import (
 )
 from raytrad.core.mesh import RadiosityMesh
 from raytrad.core.outline import boundary_edges, group, patch_vertices
+from raytrad.core.shafts import Facets, facets
 from raytrad.core.visibility import Occluder
 
 #: A sub-area nearer than this multiple of its bounding-box diagonal has its visibility
@@ -53,24 +58,74 @@ class PairFactors:
         The scene's diagonal [m] (scales the ray offsets and horizon bands).
     """
 
-    def __init__(self, mesh: RadiosityMesh, occluder: Occluder | None, diagonal: float) -> None:
+    def __init__(
+        self,
+        mesh: RadiosityMesh,
+        occluder: Occluder | None,
+        diagonal: float,
+        cull: bool = True,
+    ) -> None:
         self.mesh = mesh
         self.occluder = occluder
         self.diagonal = diagonal
+        # Ray targets sit tol.ray_offset off their surface on its lit side: a ray ending a
+        # margin short of a point *on* the surface would, at grazing angles, end closer to
+        # the surface than float32 resolves, and hit the very surface it aims at.
+        self._sub_target = mesh.subarea_point + tol.ray_offset * diagonal * mesh.subarea_normal
+        self._vert_index, self._vert_ptr = patch_vertices(mesh)
+        self._edge_start, self._edge_end, self._edge_ptr = boundary_edges(mesh)
+        #: Rays an unclassified caster would cast: (receiver, patch) pairs that see each
+        #: other x the patch's sample points (the naive count shaft culling is set against).
+        self.naive_rays = 0
+        self._count_lock = threading.Lock()
+        self.facets: Facets | None = None
+        if cull and occluder is not None:
+            self.facets = facets(occluder.positions, occluder.triangles, diagonal)
+        if self.facets is not None:
+            lift = tol.ray_offset * diagonal
+            self._patch_sides = np.stack(
+                [
+                    self.facets.patch_sides(
+                        mesh.positions[self._vert_index[a:b]],
+                        mesh.patch_normal[p] if mesh.patch_planar[p] else None,
+                        lift,
+                    )
+                    for p, (a, b) in enumerate(itertools.pairwise(self._vert_ptr))
+                ]
+            )
+            self._patch_reach = mesh.patch_radius + lift + tol.horizon * diagonal
+        self._triangle_tables()
+
+    def _triangle_tables(self) -> None:
+        """The tables that follow the mesh's triangles (rebuilt on a refined mesh)."""
+        mesh = self.mesh
         order = np.lexsort((np.arange(len(mesh.triangle_subarea)), mesh.triangle_subarea))
         self._sub_tri = order
         self._sub_ptr = np.searchsorted(
             mesh.triangle_subarea[order], np.arange(mesh.subarea_count + 1)
         )
         self._tri_corners = mesh.positions[mesh.triangles]
-        # Ray targets sit tol.ray_offset off their surface on its lit side: a ray ending a
-        # margin short of a point *on* the surface would, at grazing angles, end closer to
-        # the surface than float32 resolves, and hit the very surface it aims at.
-        self._sub_target = mesh.subarea_point + tol.ray_offset * diagonal * mesh.subarea_normal
         self._patch_tri, self._patch_tri_ptr = group(mesh.triangle_patch, mesh.patch_count)
-        self._vert_index, self._vert_ptr = patch_vertices(mesh)
-        self._edge_start, self._edge_end, self._edge_ptr = boundary_edges(mesh)
         self._shares = GatherShares(mesh, self._sub_tri, self._sub_ptr)
+
+    def refined(self, mesh: RadiosityMesh) -> PairFactors:
+        """The same pairs on a refinement of this mesh (same patches and sub-areas, its
+        vertices kept at their indices, finer triangles): the patch outlines, corner sets
+        and facet tables carry over, since bisection adds no corner to a patch's outline
+        and no height outside its corners' range; only the triangle tables are rebuilt."""
+        kept = len(self.mesh.positions)
+        if not np.array_equal(mesh.positions[:kept], self.mesh.positions):
+            return PairFactors(mesh, self.occluder, self.diagonal, self.facets is not None)
+        out = copy.copy(self)
+        out.mesh = mesh
+        out.naive_rays = 0
+        out._count_lock = threading.Lock()
+        out._triangle_tables()
+        return out
+
+    def sides(self, origins: np.ndarray) -> np.ndarray | None:
+        """Packed facet side bits of ray origins for :meth:`chunk` (None: no culling)."""
+        return None if self.facets is None else self.facets.sides(origins)
 
     def chunk_size(self, patch: int) -> int:
         """Receivers per chunk for ``patch``: :data:`PAIRS_PER_CHUNK` pairs of a receiver
@@ -80,7 +135,12 @@ class PairFactors:
         return max(1, PAIRS_PER_CHUNK // max(sub.stop - sub.start, edges, 1))
 
     def chunk(
-        self, x: np.ndarray, nx: np.ndarray, origins: np.ndarray, patch: int
+        self,
+        x: np.ndarray,
+        nx: np.ndarray,
+        origins: np.ndarray,
+        patch: int,
+        sides: np.ndarray | None = None,
     ) -> tuple[np.ndarray, int, GatherWeights]:
         """F(receiver <- patch) for receivers (x, nx) whose rays start at ``origins``, the
         rays cast, and the gather weights of the near receivers (chunk indices).
@@ -88,55 +148,45 @@ class PairFactors:
         The unoccluded factor is exact (:meth:`_unoccluded`); visibility scales it by the
         visible fraction of the patch seen through its sub-area sample points, each weighted
         by its disk-approximation factor, or, for sub-areas nearer than
-        :data:`NEAR_FACTOR` sizes, through each of their triangles weighted exactly. Where
-        nothing can occlude, samples are taken only for the near receivers' gather weights.
+        :data:`NEAR_FACTOR` sizes, through each of their triangles weighted exactly. Only
+        receivers whose shaft to the patch an occluder may cross are traced (``sides``, the
+        origins' packed facet bits from :meth:`sides`; None traces every receiver, see
+        :mod:`raytrad.core.shafts`); samples are taken for those and for the near
+        receivers' gather weights.
         """
         m = self.mesh
         unoccluded = self._unoccluded(x, nx, patch)
         sees = unoccluded > 0
+        sub = m.patch_subareas(patch)
+        with self._count_lock:
+            self.naive_rays += int(sees.sum()) * (sub.stop - sub.start)
         distance = np.linalg.norm(x - m.patch_center[patch], axis=1)
         close = sees & (distance < GATHER_RADII * m.patch_radius[patch])
-        if self.occluder is None:
-            if not close.any():
-                return unoccluded, 0, EMPTY
-            sees = close
-        sub = m.patch_subareas(patch)
-        weight, far, near_c, near_tri, near_target, near_w, near_share = self._samples(
-            x, nx, sees, sub
-        )
-        factors = unoccluded
-        if self.occluder is None:
-            far_c, far_s = np.nonzero(far)
-            who = np.concatenate([far_c, near_c])
-            blocked = np.zeros(len(who), dtype=bool)
-        else:
-            o, d, t, far_c, far_s = visibility_rays(
+        doubt = sees if self.occluder is not None else np.zeros_like(sees)
+        if self.facets is not None and sides is not None and doubt.any():
+            doubt = doubt & ~self.facets.clear(
                 origins,
-                far,
-                self._sub_target[sub],
-                near_c,
-                near_target,
-                self.occluder.origin,
-                0.5 * tol.ray_offset * self.diagonal,
+                sides,
+                self._patch_sides[patch],
+                m.patch_center[patch],
+                float(self._patch_reach[patch]),
             )
-            who = np.concatenate([far_c, near_c])
-            blocked = self.occluder.occluded_local(o, d, t)
-            total = weight.sum(axis=1) + np.bincount(near_c, weights=near_w, minlength=len(x))
-            hidden = np.bincount(
-                who,
-                weights=np.concatenate([weight[far_c, far_s], near_w]) * blocked,
-                minlength=len(x),
-            )
-            visible = np.where(total > 0, 1.0 - hidden / np.where(total > 0, total, 1.0), 0.0)
-            factors = unoccluded * np.clip(visible, 0.0, 1.0)
-        seen = ~blocked
-        far_seen, near_seen = seen[: len(far_c)], seen[len(far_c) :]
+        sampled = doubt | close
+        if not sampled.any():
+            return unoccluded, 0, EMPTY
+        weight, far, near_c, near_tri, near_target, near_w, near_share = self._samples(
+            x, nx, sampled, sub
+        )
+        factors, far_hidden, near_hidden, rays = self._visibility(
+            unoccluded, doubt, origins, sub, weight, far, near_c, near_target, near_w
+        )
         pair = np.cumsum(close) - 1
-        f, n = close[far_c] & far_seen, close[near_c] & near_seen
+        far_c, far_s = np.nonzero(far & close[:, None] & ~far_hidden)
+        n = close[near_c] & ~near_hidden
         pointer, sources, shares = self._shares.spread(
-            pair[far_c[f]],
-            far_s[f] + sub.start,
-            weight[far_c[f], far_s[f]],
+            pair[far_c],
+            far_s + sub.start,
+            weight[far_c, far_s],
             pair[near_c[n]],
             near_tri[n],
             near_w[n],
@@ -146,7 +196,54 @@ class PairFactors:
         near = np.flatnonzero(close)
         gather = GatherWeights(near, factors[near], pointer, sources, shares)
         keep = np.diff(pointer) > 0  # a near receiver that sees none of the patch gathers nothing
-        return factors, len(who) if self.occluder is not None else 0, gather.subset(keep)
+        return factors, rays, gather.subset(keep)
+
+    def _visibility(
+        self,
+        unoccluded: np.ndarray,
+        doubt: np.ndarray,
+        origins: np.ndarray,
+        sub: slice,
+        weight: np.ndarray,
+        far: np.ndarray,
+        near_c: np.ndarray,
+        near_target: np.ndarray,
+        near_w: np.ndarray,
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
+        """Trace the samples of the receivers in doubt; the others see all of the patch.
+
+        Returns
+        -------
+        factors : (C,) float64, visible factors
+        far_hidden : (C, S) bool, blocked far samples
+        near_hidden : (B,) bool, blocked near triangles
+        rays : int
+        """
+        far_hidden = np.zeros_like(far)
+        near_hidden = np.zeros(len(near_c), dtype=bool)
+        if self.occluder is None or not doubt.any():
+            return unoccluded, far_hidden, near_hidden, 0
+        traced = doubt[near_c]
+        o, d, t, far_c, far_s = visibility_rays(
+            origins,
+            far & doubt[:, None],
+            self._sub_target[sub],
+            near_c[traced],
+            near_target[traced],
+            self.occluder.origin,
+            0.5 * tol.ray_offset * self.diagonal,
+        )
+        blocked = self.occluder.occluded_local(o, d, t)
+        count = len(far_c)
+        far_hidden[far_c[blocked[:count]], far_s[blocked[:count]]] = True
+        near_hidden[np.flatnonzero(traced)[blocked[count:]]] = True
+        total = weight.sum(axis=1) + np.bincount(near_c, weights=near_w, minlength=len(doubt))
+        hidden = (weight * far_hidden).sum(axis=1) + np.bincount(
+            near_c, weights=near_w * near_hidden, minlength=len(doubt)
+        )
+        visible = np.where(total > 0, 1.0 - hidden / np.where(total > 0, total, 1.0), 0.0)
+        factors = np.where(doubt, unoccluded * np.clip(visible, 0.0, 1.0), unoccluded)
+        return factors, far_hidden, near_hidden, len(blocked)
 
     def _samples(
         self, x: np.ndarray, nx: np.ndarray, sees: np.ndarray, sub: slice

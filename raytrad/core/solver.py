@@ -40,6 +40,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from raytrad.core import compiled
 from raytrad.core.formfactor import Column, FormFactorEngine
 from raytrad.core.mesh import RadiosityMesh
 from raytrad.core.system import DiscreteSystem
@@ -435,6 +436,46 @@ def _stop_reason(
 
 
 def _shoot(
+    problem: DiscreteSystem, state: SolverState, column: Column, patch: int, amount: np.ndarray
+) -> None:
+    """Shoot ``amount`` ((3,) [W m-2]) from ``patch`` through its form-factor column: one
+    compiled loop when available (:mod:`raytrad.core.compiled`), else :func:`numpy_shoot`,
+    the reference it is tested against."""
+    fast = compiled.get()
+    if fast is None:
+        numpy_shoot(problem, state, column, patch, amount)
+        return
+    gather = column.gather
+    power, reflected, capture = fast.shoot(
+        problem.patch_entries[problem.patch_ptr[patch] : problem.patch_ptr[patch + 1]],
+        problem.entry_receiver,
+        problem.entry_weight,
+        problem.receiver_emission,
+        problem.receiver_reflectance,
+        state.irradiance,
+        state.entry_shot,
+        np.ascontiguousarray(amount, dtype=np.float64),
+        column.receivers,
+        column.factors,
+        gather.receivers,
+        gather.pointer,
+        gather.sources,
+        gather.weights,
+        problem.receiver_area,
+        problem.receiver_ptr,
+        problem.entry_patch,
+        state.patch_radiosity,
+        problem.scratch,
+    )
+    area_p = problem.patch_area[patch]
+    state.shot[patch] += amount
+    state.absorbed += power - reflected
+    state.escaped += area_p * amount - power
+    state.captured[patch] = capture / area_p
+    state.shots += 1
+
+
+def numpy_shoot(
     problem: DiscreteSystem, state: SolverState, column: Column, patch: int, amount: np.ndarray
 ) -> None:
     """Shoot ``amount`` ((3,) [W m-2]) from ``patch`` through its form-factor column.

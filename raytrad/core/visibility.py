@@ -57,6 +57,8 @@ class Occluder:
         from embreex.mesh_construction import TriangleMesh
 
         positions = np.asarray(positions, dtype=np.float64)
+        #: The blocking geometry, world coordinates (for shaft culling).
+        self.positions, self.triangles = positions, np.asarray(triangles)
         used = np.unique(triangles)
         lo, hi = positions[used].min(axis=0), positions[used].max(axis=0)
         self.origin = 0.5 * (lo + hi)

@@ -69,6 +69,7 @@ def build_report(
             "stop_reason": result.stop_reason,
             "shots": state.shots,
             "rays": rays,
+            "rays_naive": prepared.engine.rays_naive,
             "rays_per_second": rays_per_second,
             "form_factor_columns": prepared.engine.columns_computed,
             "residual": result.residual,
@@ -127,6 +128,8 @@ def add_total_error(
         "rounds": refinement.rounds,
         "by_object": refinement.by_object,
         "change_rms": refinement.change_rms.tolist(),
+        "rays": refinement.rays,
+        "rays_naive": refinement.rays_naive,
     }
     return report
 

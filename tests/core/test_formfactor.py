@@ -162,11 +162,18 @@ def test_closed_box_rows_sum_to_one_with_rays() -> None:
     scene = furnace_box()
     mesh = build_mesh(scene, FURNACE_MESH)
     with Occluder(scene.positions, scene.triangles) as occluder:
-        engine = FormFactorEngine(mesh, occluder)
+        engine = FormFactorEngine(mesh, occluder, cull=False)
         rows = _dense_factors(engine).sum(axis=1)
         engine.close()
+        culled = FormFactorEngine(mesh, occluder)
+        culled_rows = _dense_factors(culled).sum(axis=1)
+        culled.close()
     assert engine.rays_cast > 0
     np.testing.assert_allclose(rows, 1.0, atol=1e-5)
+    # inside a convex box no wall separates a receiver from a patch: shaft culling casts
+    # no ray, and every factor is its unoccluded value
+    assert culled.rays_cast == 0
+    np.testing.assert_allclose(culled_rows, 1.0, atol=1e-5)
 
 
 def test_folded_patch_gives_its_own_receivers_almost_nothing(cornell: Prepared) -> None:

@@ -1,0 +1,264 @@
+"""Shaft culling (raytrad.core.shafts): facets from independent geometry, the compiled test
+against its numpy reference, and the culled pass against tracing every pair.
+
+The property that matters is conservativeness: a pair called clear must have nothing in
+its shaft. It is checked two ways, neither through the culling code: Embree itself finds
+no blocked segment among random segments from a clear pair's receiver to its patch, and
+the culled pass gives the unculled pass's factors and gather weights.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+
+import numpy as np
+import pytest
+
+from raytrad.core import compiled, kernels
+from raytrad.core.formfactor import FormFactorEngine
+from raytrad.core.mesh import MeshSettings
+from raytrad.core.pipeline import Prepared, prepare
+from raytrad.core.shafts import MAX_FACETS, facets
+from raytrad.scene import Scene
+from raytrad.scene.builder import quads_scene
+from raytrad.scene.builtin import shadow_scene
+
+CUBE = np.array([[x, y, z] for x in (0.0, 1.0) for y in (0.0, 1.0) for z in (0.0, 1.0)])
+# the cube's 6 faces as 12 triangles (corner index = 4x + 2y + z)
+CUBE_TRIANGLES = np.array(
+    [
+        [0, 1, 3], [0, 3, 2], [4, 6, 7], [4, 7, 5],  # x = 0, x = 1
+        [0, 4, 5], [0, 5, 1], [2, 3, 7], [2, 7, 6],  # y = 0, y = 1
+        [0, 2, 6], [0, 6, 4], [1, 5, 7], [1, 7, 3],  # z = 0, z = 1
+    ]
+)  # fmt: skip
+
+
+def _unpack(packed: np.ndarray, count: int) -> tuple[np.ndarray, np.ndarray]:
+    words = packed.shape[-1] // 2
+    bits = np.unpackbits(packed.astype("<u8").view(np.uint8), axis=-1, bitorder="little")
+    bits = bits.astype(bool)
+    return bits[..., :count], bits[..., 64 * words : 64 * words + count]
+
+
+def _polygon_area(ring: np.ndarray) -> float:
+    return 0.5 * float(np.linalg.norm(np.cross(ring, np.roll(ring, -1, axis=0)).sum(axis=0)))
+
+
+def test_unit_cube_has_six_square_facets() -> None:
+    found = facets(CUBE, CUBE_TRIANGLES, diagonal=np.sqrt(3.0))
+    assert found is not None and found.count == 6
+    # one facet per axis-aligned plane, at offsets 0 and 1
+    planes = sorted(
+        (int(np.abs(n).argmax()), round(float(d), 12))
+        for n, d in zip(found.normal, found.offset, strict=True)
+    )
+    assert planes == [(0, 0.0), (0, 1.0), (1, 0.0), (1, 1.0), (2, 0.0), (2, 1.0)]
+    np.testing.assert_allclose(found.radius, np.sqrt(0.5), rtol=1e-8)
+    for q in range(6):
+        ring = found.hull[found.hull_ptr[q] : found.hull_ptr[q + 1]]
+        assert len(ring) == 4
+        assert _polygon_area(ring) == pytest.approx(1.0, rel=1e-12)
+        # counter-clockwise about the facet's normal
+        turn = np.cross(ring[1] - ring[0], ring[2] - ring[1])
+        assert turn @ found.normal[q] > 0
+
+
+def test_coplanar_triangles_share_a_facet_and_tilted_ones_do_not() -> None:
+    # two triangles of a square in z = 0, and a square folded by 1e-3 along its diagonal
+    positions = np.array(
+        [
+            [0, 0, 0],
+            [1, 0, 0],
+            [1, 1, 0],
+            [0, 1, 0],
+            [0, 0, 1],
+            [1, 0, 1],
+            [1, 1, 1.001],
+            [0, 1, 1],
+        ],
+        dtype=float,
+    )
+    triangles = np.array([[0, 1, 2], [0, 2, 3], [4, 5, 6], [4, 6, 7]])
+    found = facets(positions, triangles, diagonal=2.0)
+    assert found is not None and found.count == 3
+
+
+def test_too_many_facets_turns_culling_off() -> None:
+    rng = np.random.default_rng(3)
+    corners = rng.normal(size=(MAX_FACETS + 1, 3, 3))
+    assert facets(corners.reshape(-1, 3), np.arange(corners.size // 3).reshape(-1, 3), 5.0) is None
+
+
+def _soup(rng: np.random.Generator, count: int) -> tuple[np.ndarray, np.ndarray]:
+    """``count`` small random triangles, each in its own plane, in the unit cube."""
+    centre = rng.uniform(0.0, 1.0, size=(count, 1, 3))
+    corners = centre + 0.08 * rng.normal(size=(count, 3, 3))
+    return corners.reshape(-1, 3), np.arange(3 * count).reshape(-1, 3)
+
+
+def test_side_bits_are_the_signs_of_the_heights() -> None:
+    rng = np.random.default_rng(4)
+    found = facets(*_soup(rng, 150), diagonal=1.7)  # 3 words of bits
+    assert found is not None and found.count == 150 and found.words == 3
+    points = rng.uniform(0.0, 1.0, size=(500, 3))
+    heights = points @ found.normal.T - found.offset
+    front, back = _unpack(found.sides(points), found.count)
+    np.testing.assert_array_equal(front, heights > found.band)
+    np.testing.assert_array_equal(back, heights < -found.band)
+
+
+@pytest.mark.skipif(compiled.get() is None, reason="numba is not installed")
+@pytest.mark.parametrize("count", [5, 64, 150])
+def test_compiled_shaft_test_matches_numpy(count: int) -> None:
+    rng = np.random.default_rng(count)
+    found = facets(*_soup(rng, count), diagonal=1.7)
+    assert found is not None
+    origins = rng.uniform(-0.2, 1.2, size=(3000, 3))
+    origins[:300] = found.center[rng.integers(0, count, 300)]  # inside facets' spheres
+    sides = found.sides(origins)
+    for trial in range(12):
+        patch = rng.uniform(0.0, 1.0, size=(6, 3))
+        patch_sides = found.patch_sides(patch, None, 1e-5)
+        centre, reach = patch.mean(axis=0), 0.02 * trial
+        args = (
+            origins,
+            sides,
+            patch_sides,
+            found.normal,
+            found.offset,
+            found.center,
+            found.radius,
+            found.hull,
+            found.hull_ptr,
+            found.band,
+            centre,
+            reach,
+        )
+        fast = kernels.shaft_clear(*args)
+        np.testing.assert_array_equal(fast, kernels.numpy_shaft_clear(*args))
+        if trial == 0:
+            assert 0 < fast.sum() < len(fast)  # both outcomes are exercised
+
+
+def furniture_room(seed: int, blocks: int = 4) -> Scene:
+    """A 4 x 3 x 4 m room lit from a ceiling panel, with randomly turned blocks on the floor
+    and a tilted double-sided plate floating in it (y up)."""
+    rng = np.random.default_rng(seed)
+    s, h = 4.0, 3.0
+    room = np.array(
+        [
+            [[0, 0, 0], [0, 0, s], [s, 0, s], [s, 0, 0]],  # floor
+            [[0, h, 0], [s, h, 0], [s, h, s], [0, h, s]],  # ceiling
+            [[0, 0, 0], [s, 0, 0], [s, h, 0], [0, h, 0]],
+            [[0, 0, s], [0, h, s], [s, h, s], [s, 0, s]],
+            [[0, 0, 0], [0, h, 0], [0, h, s], [0, 0, s]],
+            [[s, 0, 0], [s, 0, s], [s, h, s], [s, h, 0]],
+        ],
+        dtype=float,
+    )
+    quads = list(room)
+    facing = [(0, 1, 0), (0, -1, 0), (0, 0, 1), (0, 0, -1), (1, 0, 0), (-1, 0, 0)]
+    material = ["wall"] * 6
+    light = np.array(
+        [[1.5, h - 0.01, 1.5], [2.5, h - 0.01, 1.5], [2.5, h - 0.01, 2.5], [1.5, h - 0.01, 2.5]]
+    )
+    quads.append(light)
+    facing.append((0, -1, 0))
+    material.append("light")
+    for _ in range(blocks):
+        centre = rng.uniform(0.8, s - 0.8, size=2)
+        half = rng.uniform(0.15, 0.4)
+        angle = rng.uniform(0, np.pi / 2)
+        offsets = half * np.array([[1, 1], [-1, 1], [-1, -1], [1, -1]], dtype=float)
+        c, si = np.cos(angle), np.sin(angle)
+        xz = centre + offsets @ np.array([[c, si], [-si, c]])
+        height = rng.uniform(0.3, 1.2)
+        base = np.column_stack([xz[:, 0], np.zeros(4), xz[:, 1]])
+        top = base + np.array([0.0, height, 0.0])
+        quads.append(top)
+        facing.append((0, 1, 0))
+        for k in range(4):
+            j = (k + 1) % 4
+            quads.append(np.array([base[k], base[j], top[j], top[k]]))
+            out = 0.5 * (base[k] + base[j]) - base.mean(axis=0)
+            facing.append(tuple(out))
+        material += ["block"] * 5
+    plate = np.array([[1.0, 1.6, 1.0], [2.0, 1.9, 1.0], [2.0, 1.9, 2.0], [1.0, 1.6, 2.0]])
+    quads.append(plate)
+    facing.append((0, -1, 0))
+    material.append("plate")
+    return quads_scene(
+        np.array(quads),
+        {
+            "wall": (0.6, 0.0, False),
+            "light": (0.0, 10.0, False),
+            "block": (0.5, 0.0, False),
+            "plate": (0.4, 0.0, True),
+        },
+        material,
+        np.array(facing, dtype=float),
+    )
+
+
+@pytest.fixture(scope="module", params=[1, 2])
+def room(request: pytest.FixtureRequest) -> Iterator[Prepared]:
+    prepared = prepare(furniture_room(request.param), MeshSettings(receivers=1500, patches=120))
+    yield prepared
+    prepared.close()
+
+
+def test_clear_pairs_have_no_blocked_segment(room: Prepared) -> None:
+    """Embree, not the culling code, checks 64 random segments of every clear pair."""
+    engine = FormFactorEngine(room.mesh, room.occluder)
+    pairs, mesh = engine._pairs, room.mesh
+    assert pairs.facets is not None
+    rng = np.random.default_rng(0)
+    checked = 0
+    for patch in range(0, mesh.patch_count, 3):
+        receivers = engine._candidates(patch)
+        clear = pairs.facets.clear(
+            engine._origins[receivers],
+            engine._sides[receivers],
+            pairs._patch_sides[patch],
+            mesh.patch_center[patch],
+            float(pairs._patch_reach[patch]),
+        )
+        chosen = receivers[clear][:40]
+        triangles = np.flatnonzero(mesh.triangle_patch == patch)
+        for r in chosen:
+            tri = rng.choice(triangles, 64)
+            w = rng.dirichlet(np.ones(3), 64)
+            ends = np.einsum("nk,nkj->nj", w, mesh.positions[mesh.triangles[tri]])
+            starts = np.repeat(engine._origins[r][None, :], 64, axis=0)
+            blocked = room.occluder.occluded(starts, ends, mesh.triangle_normal[tri])
+            assert not blocked.any(), (patch, r)
+        checked += len(chosen)
+    assert checked > 1000
+
+
+def _columns(engine: FormFactorEngine) -> list:
+    return [engine.column(p) for p in range(engine.mesh.patch_count)]
+
+
+@pytest.mark.parametrize("scene", ["room", "shadow"])
+def test_culled_pass_equals_tracing_every_pair(scene: str, room: Prepared, prepare_scene) -> None:
+    prepared = (
+        room if scene == "room" else prepare_scene(shadow_scene(), MeshSettings(receivers=1200))
+    )
+    culled = FormFactorEngine(prepared.mesh, prepared.occluder)
+    every = FormFactorEngine(prepared.mesh, prepared.occluder, cull=False)
+    try:
+        for a, b in zip(_columns(culled), _columns(every), strict=True):
+            np.testing.assert_array_equal(a.receivers, b.receivers)
+            np.testing.assert_allclose(a.factors, b.factors, rtol=1e-12, atol=1e-15)
+            np.testing.assert_array_equal(a.gather.receivers, b.gather.receivers)
+            np.testing.assert_array_equal(a.gather.pointer, b.gather.pointer)
+            np.testing.assert_array_equal(a.gather.sources, b.gather.sources)
+            np.testing.assert_allclose(a.gather.weights, b.gather.weights, rtol=1e-12, atol=1e-15)
+        # the same naive count, and culling leaves far fewer rays
+        assert culled.rays_naive == every.rays_naive > 0
+        assert culled.rays_cast < 0.7 * every.rays_cast
+    finally:
+        culled.close()
+        every.close()
