@@ -26,6 +26,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from raytrad.core import compiled
 from raytrad.core.mesh import RadiosityMesh
 
 #: Pairs whose receiver is nearer than this many patch radii to the patch's centre gather
@@ -206,14 +207,52 @@ class GatherShares:
         weight = (weight[:, None] * corner_share).reshape(-1)
         pair = np.repeat(pair, 3)
         keep = weight > 0
-        key = pair[keep] * (int(self.corners.max(initial=0)) + 1) + source[keep]
-        unique, inverse = np.unique(key, return_inverse=True)
-        summed = np.bincount(inverse.reshape(-1), weights=weight[keep])
-        stride = int(self.corners.max(initial=0)) + 1
-        owner, sources = unique // stride, unique % stride
-        totals = np.bincount(owner, weights=summed, minlength=pairs)
-        pointer = np.searchsorted(owner, np.arange(pairs + 1)).astype(np.int64)
-        return pointer, sources.astype(np.int64), summed / totals[owner]
+        return sum_shares(pair[keep], source[keep], weight[keep], pairs)
+
+
+def sum_shares(
+    pair: np.ndarray, source: np.ndarray, weight: np.ndarray, pairs: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Weights summed per (pair, source), compiled when available (see
+    :func:`numpy_sum_shares`, the reference)."""
+    fast = compiled.get()
+    if fast is None:
+        return numpy_sum_shares(pair, source, weight, pairs)
+    pointer, sources, weights = fast.sum_shares(
+        np.ascontiguousarray(pair, dtype=np.int64),
+        np.ascontiguousarray(source, dtype=np.int64),
+        np.ascontiguousarray(weight, dtype=np.float64),
+        int(pairs),
+    )
+    return pointer, sources, weights
+
+
+def numpy_sum_shares(
+    pair: np.ndarray, source: np.ndarray, weight: np.ndarray, pairs: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Positive weights summed per (pair, source) and normalised per pair.
+
+    Parameters
+    ----------
+    pair, source : (N,) int
+        Pair index (any order) and receiver of each weight.
+    weight : (N,) float64
+        Positive weights.
+    pairs : int
+
+    Returns
+    -------
+    pointer : (pairs + 1,) int64, CSR by pair
+    sources : (S,) int64, ascending within a pair
+    weights : (S,) float64, summing to 1 per pair
+    """
+    stride = int(source.max(initial=0)) + 1
+    unique, inverse = np.unique(pair * stride + source, return_inverse=True)
+    summed = np.bincount(inverse.reshape(-1), weights=weight)
+    owner, sources = unique // stride, unique % stride
+    totals = np.bincount(owner, weights=summed, minlength=pairs)
+    pointer = np.searchsorted(owner, np.arange(pairs + 1)).astype(np.int64)
+    return pointer, sources.astype(np.int64), summed / totals[owner]
 
 
 def near_field_irradiance(

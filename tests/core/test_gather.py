@@ -12,8 +12,11 @@ from __future__ import annotations
 from collections.abc import Callable
 
 import numpy as np
+import pytest
 
+from raytrad.core import compiled
 from raytrad.core.formfactor import receiver_points
+from raytrad.core.gather import numpy_sum_shares, sum_shares
 from raytrad.core.kernels import linear_corner_shares
 from raytrad.core.pipeline import Prepared
 from raytrad.core.solver import SolveResult, SolveSettings, solve
@@ -92,3 +95,26 @@ def test_shots_conserve_power_in_a_closed_box(
     emitted = result.emitted_power
     assert (np.abs(result.state.escaped) <= 1e-9 * emitted).all()
     np.testing.assert_allclose(result.radiosity * (1 - 0.99), 1.0, rtol=2e-3)
+
+
+@pytest.mark.skipif(compiled.get() is None, reason="numba is not installed")
+def test_compiled_share_sums_match_numpy() -> None:
+    rng = np.random.default_rng(11)
+    pairs = 300
+    pair = rng.integers(0, pairs, 20000)
+    pair[:50] = 7  # one crowded pair; some pairs get nothing
+    source = rng.integers(0, 500, 20000)
+    source[:50] = 3  # repeated (pair, source): summed
+    weight = rng.random(20000) + 1e-3
+    fast = sum_shares(pair, source, weight, pairs)
+    slow = numpy_sum_shares(pair, source, weight, pairs)
+    np.testing.assert_array_equal(fast[0], slow[0])
+    np.testing.assert_array_equal(fast[1], slow[1])
+    np.testing.assert_allclose(fast[2], slow[2], rtol=1e-15, atol=0)
+    # independent check: each pair's weights sum to 1 and carry the raw sums' proportions
+    sums = np.bincount(pair, weights=weight, minlength=pairs)
+    got = np.add.reduceat(fast[2], fast[0][:-1][np.diff(fast[0]) > 0])
+    np.testing.assert_allclose(got, 1.0, rtol=1e-12)
+    k = np.flatnonzero(fast[1][fast[0][7] : fast[0][8]] == 3)[0] + fast[0][7]
+    mask = (pair == 7) & (source == 3)
+    assert fast[2][k] == pytest.approx(weight[mask].sum() / sums[7], rel=1e-12)
