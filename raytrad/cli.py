@@ -392,7 +392,11 @@ class _StopFlag:
         if self.requested:
             raise KeyboardInterrupt
         self.requested = True
-        print("\nraytrad: stopping after this shot (Ctrl-C again to abort)", file=sys.stderr)
+        print(
+            "\nraytrad: stopping after the current column or shot, then writing the "
+            "results and a checkpoint (Ctrl-C again to abort)",
+            file=sys.stderr,
+        )
 
 
 def _parse_camera(text: str) -> Camera:
@@ -547,7 +551,7 @@ def _print_summary(report: dict[str, Any], outputs: dict[str, Path]) -> None:
         if error.get("true_rms") is not None:
             text += f", true {max(error['true_rms']):.2e} ({report['reference']['kind']})"
         lines.append(text + " of the solve (relative RMS, worst channel)")
-    if error.get("total_rms") is not None:
+    if error.get("total_rms") is not None and math.isfinite(max(_finite(error["total_rms"]))):
         parts = ", ".join(
             f"{name} {_fmt(max(_finite(values)))}" for name, values in error["parts"].items()
         )

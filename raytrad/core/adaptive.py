@@ -157,7 +157,10 @@ def refine_adaptively(
     changes: list[tuple[np.ndarray, np.ndarray]] = []
     for _ in range(settings.rounds):
         if stop is not None and stop():
-            log.info("refinement stopped after %d rounds: the time limit is spent", out.rounds)
+            log.info(
+                "refinement stopped after %d rounds (time limit spent or interrupted)",
+                out.rounds,
+            )
             break
         room = budget - out.mesh.receiver_count
         order = _to_split(out.mesh, out.radiosity, settings, smallest, room)

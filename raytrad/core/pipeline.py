@@ -207,15 +207,23 @@ class RunBudget:
 
 def _pass_progress() -> Callable[[int, int], None]:
     """Logs the form-factor pass's progress and time left every :data:`PASS_LOG_SECONDS`
-    (a log line, so that it shows in CI logs and batch runs, not only on a terminal)."""
+    (a log line, so that it shows in CI logs and batch runs, not only on a terminal).
+
+    The rate is measured from the first column's end: the first column also pays for
+    compiling the kernels on a first run (several seconds), which would inflate the
+    estimate many times over."""
     start = last = time.perf_counter()
+    first = start
 
     def report(done: int, total: int) -> None:
-        nonlocal last
+        nonlocal last, first
         now = time.perf_counter()
+        if done == 1:
+            first = now
         if now - last >= PASS_LOG_SECONDS and done < total:
             last = now
-            left = (now - start) / done * (total - done)
+            rate = (now - first) / (done - 1) if done > 1 else now - start
+            left = rate * (total - done)
             log.info(
                 "form factors: %d of %d columns in %.0f s, about %.0f s left",
                 done,
