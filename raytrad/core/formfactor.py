@@ -23,13 +23,13 @@ import logging
 import threading
 from collections.abc import Callable, Generator, Iterable
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass
 from typing import TypeVar
 
 import numpy as np
 
 from raytrad.constants import scene_diagonal, tol
 from raytrad.core.balance import BALANCE_ITERATIONS, balance_columns, closed_patches
+from raytrad.core.columns import Column, ColumnSpill, pack_columns, unpack_columns
 from raytrad.core.gather import (
     EMPTY,
     GatherRows,
@@ -77,39 +77,6 @@ _WORKER = _Worker()
 # --------------------------------------------------------------------------------------
 
 
-@dataclass(frozen=True)
-class Column:
-    """Form factors from every receiver to one patch.
-
-    Attributes
-    ----------
-    receivers : (K,) int32 (int64 beyond 2**31 receivers)
-        Receivers with a non-zero factor, ascending.
-    factors : (K,) float32 (raw) or float64 (balanced)
-        F(receiver <- patch) [1]. Raw columns are stored in float32: float32's relative
-        rounding, 6e-8, is far below the sampled visibility's error, and it cannot leak
-        energy, because balancing computes its row and column scales (float64) from the
-        stored values themselves, so closed rows still sum to 1 and closed patches still
-        capture 1 to float64 rounding. Balanced columns (:meth:`FormFactorEngine.column`)
-        are float64.
-    rays : int
-        Visibility rays cast to compute it.
-    gather : GatherWeights
-        Where on the patch the factor of each near receiver comes from
-        (:mod:`raytrad.core.gather`).
-    """
-
-    receivers: np.ndarray
-    factors: np.ndarray
-    rays: int
-    gather: GatherWeights = EMPTY
-
-    @property
-    def nbytes(self) -> int:
-        """Memory the column holds [bytes]."""
-        return int(self.receivers.nbytes + self.factors.nbytes + self.gather.nbytes + 64)
-
-
 class FormFactorEngine:
     """Computes (and caches) columns F(all receivers <- patch).
 
@@ -119,7 +86,10 @@ class FormFactorEngine:
     occluder : Occluder or None
         None when nothing in the scene can block light (a convex enclosure): no rays.
     cache_bytes : int
-        Memory for cached columns; a column is computed once and reused while it fits.
+        Memory for cached columns (receivers and factors); a column is computed once and
+        reused while it fits, and one that does not fit is spilled to a temporary file
+        and read back when shot again (0: no cache, recomputed each time). The
+        near-field gather weights are kept in memory beside the cache.
     cull : bool
         Trace only the (receiver, patch) pairs whose shaft an occluder may cross
         (:mod:`raytrad.core.shafts`); False traces every pair (the tests' reference).
@@ -141,6 +111,7 @@ class FormFactorEngine:
         self.cache_bytes = cache_bytes
         self._cache: dict[int, Column] = {}
         self._cached_bytes = 0
+        self._spill = ColumnSpill()
         self._lock = threading.Lock()
         self._pool: ThreadPoolExecutor | None = None
         self.rays_cast = 0
@@ -190,6 +161,7 @@ class FormFactorEngine:
         if self._pool is not None:
             self._pool.shutdown()
             self._pool = None
+        self._spill.close()
 
     def column(self, patch: int) -> Column:
         """F(receiver <- patch) for every receiver that can see it (balanced, see
@@ -213,10 +185,20 @@ class FormFactorEngine:
         return out
 
     def _raw_column(self, patch: int) -> Column:
+        known = self._known(patch)
+        if known is not None:
+            return known
+        return self._store(patch, self._compute(patch))
+
+    def _known(self, patch: int) -> Column | None:
+        """The column of ``patch`` from the cache or the spill files, or None."""
         cached = self._cache.get(patch)
         if cached is not None:
             return cached
-        return self._store(patch, self._compute(patch))
+        stored = self._spill.read(patch)
+        if stored is None:
+            return None
+        return Column(stored[0], stored[1], 0, self._gathers.get(patch, EMPTY))
 
     def _store(self, patch: int, col: Column) -> Column:
         """Count, sum and (while it fits) cache a newly computed column."""
@@ -229,41 +211,22 @@ class FormFactorEngine:
             self._row_sum[col.receivers] += col.factors
             if len(col.receivers) and self._row_scale is None:
                 self.max_row_sum = max(self.max_row_sum, float(self._row_sum[col.receivers].max()))
-        size = col.nbytes
+        size = int(col.receivers.nbytes + col.factors.nbytes + 64)  # gathers are kept anyway
         if self._cached_bytes + size <= self.cache_bytes:
             self._cache[patch] = col
             self._cached_bytes += size
+        elif self.cache_bytes > 0:  # spill it, to read back instead of tracing again
+            self._spill.write(patch, col.receivers, col.factors)
         return col
 
     def pass_columns(self) -> dict[str, np.ndarray]:
         """The columns of a form-factor pass cut short, packed as flat arrays for a
         checkpoint (:meth:`restore_columns` reads them back); empty once every column is
-        computed. Only cached columns are kept."""
+        computed. Cached and spilled columns are kept."""
         if self.complete:
             return {}
-        order = [p for p in self._pass_order() if p in self._cache]
-        cols = [self._cache[p] for p in order]
-        gathers = [c.gather for c in cols]
-
-        def flat(values: list[np.ndarray], dtype: type) -> np.ndarray:
-            return np.concatenate(values) if values else np.zeros(0, dtype)
-
-        def lengths(values: list[np.ndarray]) -> np.ndarray:
-            return np.array([len(v) for v in values], dtype=np.int64)
-
-        return {
-            "patch": np.array(order, dtype=np.int64),
-            "length": lengths([c.receivers for c in cols]),
-            "receivers": flat([c.receivers for c in cols], np.int64),
-            "factors": flat([c.factors for c in cols], np.float64),
-            "near_length": lengths([g.receivers for g in gathers]),
-            "near_receivers": flat([g.receivers for g in gathers], np.int64),
-            "near_factors": flat([g.factors for g in gathers], np.float64),
-            "near_pointer": flat([g.pointer[1:] for g in gathers], np.int64),
-            "source_length": lengths([g.sources for g in gathers]),
-            "sources": flat([g.sources for g in gathers], np.int64),
-            "weights": flat([g.weights for g in gathers], np.float64),
-        }
+        order = [p for p in self._pass_order() if p in self._cache or p in self._spill]
+        return pack_columns(order, [self._raw_column(p) for p in order])
 
     def restore_columns(self, packed: dict[str, np.ndarray]) -> int:
         """Cache the columns :meth:`pass_columns` packed (a resumed pass computes only the
@@ -273,36 +236,21 @@ class FormFactorEngine:
         -------
         int, columns restored.
         """
-        ends = {
-            name: np.concatenate([[0], np.cumsum(packed[name])])
-            for name in ("length", "near_length", "source_length")
-        }
-        for i, patch in enumerate(packed["patch"].tolist()):
-            a, b = ends["length"][i : i + 2]
-            g, h = ends["near_length"][i : i + 2]
-            u, v = ends["source_length"][i : i + 2]
-            gather = GatherWeights(
-                packed["near_receivers"][g:h],
-                packed["near_factors"][g:h],
-                np.concatenate([[0], packed["near_pointer"][g:h]]).astype(np.int64),
-                packed["sources"][u:v],
-                packed["weights"][u:v],
-            )
-            receivers = packed["receivers"][a:b].astype(self._index)
-            col = Column(receivers, packed["factors"][a:b].astype(np.float32), 0, gather)
+        restored = unpack_columns(packed, self._index)
+        for patch, col in restored:
             self._store(patch, col)
-        return len(packed["patch"])
+        return len(restored)
 
     def raw_columns(self, patches: Iterable[int]) -> Generator[tuple[int, Column], None, None]:
         """(patch, column before balancing) for ``patches`` in order, the missing ones
         computed a patch per thread on every core."""
         patches = list(patches)
-        todo = [p for p in patches if p not in self._cache]
+        todo = [p for p in patches if p not in self._cache and p not in self._spill]
         done = self._per_patch(self._compute, todo)
         try:
             for patch in patches:
-                cached = self._cache.get(patch)
-                yield patch, cached if cached is not None else self._store(patch, next(done))
+                known = self._known(patch)
+                yield patch, known if known is not None else self._store(patch, next(done))
         finally:
             done.close()
 
@@ -488,12 +436,12 @@ class FormFactorEngine:
         )
         keep = factors > 0
         gather = gather.subset(keep[gather.receivers])
-        gather = GatherWeights(
-            candidates[gather.receivers],
+        gather = GatherWeights(  # compact, as the columns (see Column)
+            candidates[gather.receivers].astype(self._index),
             factors[gather.receivers],
             gather.pointer,
-            gather.sources,
-            gather.weights,
+            gather.sources.astype(self._index),
+            gather.weights.astype(np.float32),
         )
         return Column(
             candidates[keep].astype(self._index), factors[keep].astype(np.float32), rays, gather

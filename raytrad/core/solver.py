@@ -41,7 +41,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from raytrad.core import compiled
-from raytrad.core.formfactor import Column, FormFactorEngine
+from raytrad.core.columns import Column
+from raytrad.core.formfactor import FormFactorEngine
 from raytrad.core.mesh import RadiosityMesh
 from raytrad.core.system import DiscreteSystem
 from raytrad.errors import SettingsError, SolverError

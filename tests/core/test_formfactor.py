@@ -8,16 +8,18 @@ raytrad itself.
 from __future__ import annotations
 
 import math
+import os
 from collections.abc import Callable
 
 import numpy as np
 import pytest
 
+from raytrad.core import compiled
 from raytrad.core.formfactor import FormFactorEngine, receiver_points
 from raytrad.core.mesh import MeshSettings, RadiosityMesh, build_mesh
 from raytrad.core.pathtrace import path_traced_radiosity
 from raytrad.core.pipeline import Prepared
-from raytrad.core.solver import SolveResult
+from raytrad.core.solver import SolveResult, SolveSettings, solve
 from raytrad.core.visibility import Occluder, nothing_can_occlude
 from raytrad.scene import Scene, triangle_areas_normals
 from raytrad.scene.builtin import furnace_box, shadow_scene
@@ -172,7 +174,8 @@ def test_closed_box_rows_sum_to_one_with_rays() -> None:
     np.testing.assert_allclose(rows, 1.0, atol=1e-5)
     # inside a convex box no wall separates a receiver from a patch: shaft culling casts
     # no ray, and every factor is its unoccluded value
-    assert culled.rays_cast == 0
+    if compiled.get() is not None:  # culling runs with the compiled shaft test only
+        assert culled.rays_cast == 0
     np.testing.assert_allclose(culled_rows, 1.0, atol=1e-5)
 
 
@@ -503,3 +506,23 @@ def test_shadow_scene_needs_rays(prepare_scene: Callable[..., Prepared]) -> None
     assert prepared.occluder is not None
     prepared.engine.column(0)
     assert prepared.engine.rays_cast > 0
+
+
+def test_columns_beyond_the_cache_are_spilled_not_retraced(cornell: Prepared) -> None:
+    """With a cache too small for any column, every column goes to a spill file once: the
+    solve reads them back (no ray after the pass) and gives the cached engine's answer."""
+    tiny = FormFactorEngine(cornell.mesh, cornell.occluder, cache_bytes=1)
+    try:
+        tiny.balance(cornell.closed_receivers)
+        assert tiny._spill.bytes > 0 and not tiny._cache
+        assert len(tiny._spill) == cornell.mesh.patch_count
+        rays = tiny.rays_cast
+        settings = SolveSettings(max_shots=200)
+        spilled = solve(cornell.mesh, tiny, settings)
+        cached = solve(cornell.mesh, cornell.engine, settings)
+        assert tiny.rays_cast == rays  # read back, never traced again
+        np.testing.assert_array_equal(spilled.radiosity, cached.radiosity)
+        folder = tiny._spill.folder
+    finally:
+        tiny.close()
+    assert folder and not os.path.exists(folder)  # the spill files go with the engine

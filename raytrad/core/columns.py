@@ -1,0 +1,171 @@
+"""Form-factor columns and where they are kept: in memory, in spill files beyond the
+cache, and packed flat for a checkpoint.
+
+A column holds F(receiver <- patch) for the receivers that see one patch, compactly
+(int32 receivers, float32 raw factors: 8 bytes an entry). The engine
+(:class:`~raytrad.core.formfactor.FormFactorEngine`) caches columns up to ``--cache-mb``;
+the rest go to :class:`ColumnSpill`, one small ``.npz`` file each in a temporary folder
+(honours ``TMPDIR``), and are read back when a patch shoots again: reading a column back
+takes milliseconds where tracing it again took a good fraction of a second, so a scene
+whose columns outgrow the cache no longer slows the solve down by orders of magnitude.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import tempfile
+from dataclasses import dataclass
+
+import numpy as np
+
+from raytrad.core.gather import EMPTY, GatherWeights
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class Column:
+    """Form factors from every receiver to one patch.
+
+    Attributes
+    ----------
+    receivers : (K,) int32 (int64 beyond 2**31 receivers)
+        Receivers with a non-zero factor, ascending.
+    factors : (K,) float32 (raw) or float64 (balanced)
+        F(receiver <- patch) [1]. Raw columns are stored in float32: float32's relative
+        rounding, 6e-8, is far below the sampled visibility's error, and it cannot leak
+        energy, because balancing computes its row and column scales (float64) from the
+        stored values themselves, so closed rows still sum to 1 and closed patches still
+        capture 1 to float64 rounding. Balanced columns (:meth:`FormFactorEngine.column`)
+        are float64.
+    rays : int
+        Visibility rays cast to compute it.
+    gather : GatherWeights
+        Where on the patch the factor of each near receiver comes from
+        (:mod:`raytrad.core.gather`).
+    """
+
+    receivers: np.ndarray
+    factors: np.ndarray
+    rays: int
+    gather: GatherWeights = EMPTY
+
+    @property
+    def nbytes(self) -> int:
+        """Memory the column holds [bytes]."""
+        return int(self.receivers.nbytes + self.factors.nbytes + self.gather.nbytes + 64)
+
+
+class ColumnSpill:
+    """Columns that did not fit the cache, one temporary file each.
+
+    The folder is made on the first write and removed by :meth:`close`. When a file cannot
+    be written (no space, no temporary folder), a warning is logged once and nothing more
+    is spilled: those columns are then traced again when needed, as without a spill.
+    """
+
+    def __init__(self) -> None:
+        self._folder: tempfile.TemporaryDirectory[str] | None = None
+        self._paths: dict[int, str] = {}
+        self._failed = False
+        #: Bytes written to spill files.
+        self.bytes = 0
+
+    def __contains__(self, patch: int) -> bool:
+        return patch in self._paths
+
+    def __len__(self) -> int:
+        return len(self._paths)
+
+    @property
+    def folder(self) -> str | None:
+        """The spill folder, or None before the first spill (and after :meth:`close`)."""
+        return None if self._folder is None else self._folder.name
+
+    def write(self, patch: int, receivers: np.ndarray, factors: np.ndarray) -> bool:
+        """Spill one column; False when it could not be written."""
+        if self._failed:
+            return False
+        try:
+            if self._folder is None:
+                self._folder = tempfile.TemporaryDirectory(prefix="raytrad-columns-")
+                log.info(
+                    "form factors: columns beyond --cache-mb are spilled to %s", self._folder.name
+                )
+            path = os.path.join(self._folder.name, f"{patch}.npz")
+            np.savez(path, receivers=receivers, factors=factors)
+        except OSError as error:
+            self._failed = True
+            log.warning("cannot spill form-factor columns (%s): tracing them again instead", error)
+            return False
+        self._paths[patch] = path
+        self.bytes += int(receivers.nbytes + factors.nbytes)
+        return True
+
+    def read(self, patch: int) -> tuple[np.ndarray, np.ndarray] | None:
+        """(receivers, factors) of a spilled column, or None."""
+        path = self._paths.get(patch)
+        if path is None:
+            return None
+        with np.load(path) as data:
+            return data["receivers"], data["factors"]
+
+    def close(self) -> None:
+        """Remove the spill files."""
+        if self._folder is not None:
+            self._folder.cleanup()
+            self._folder = None
+        self._paths.clear()
+
+
+def pack_columns(patches: list[int], columns: list[Column]) -> dict[str, np.ndarray]:
+    """Columns as flat arrays for a checkpoint (:func:`unpack_columns` reads them back)."""
+    gathers = [c.gather for c in columns]
+
+    def flat(values: list[np.ndarray], dtype: type) -> np.ndarray:
+        return np.concatenate(values) if values else np.zeros(0, dtype)
+
+    def lengths(values: list[np.ndarray]) -> np.ndarray:
+        return np.array([len(v) for v in values], dtype=np.int64)
+
+    return {
+        "patch": np.array(patches, dtype=np.int64),
+        "length": lengths([c.receivers for c in columns]),
+        "receivers": flat([c.receivers for c in columns], np.int64),
+        "factors": flat([c.factors for c in columns], np.float32),
+        "near_length": lengths([g.receivers for g in gathers]),
+        "near_receivers": flat([g.receivers for g in gathers], np.int64),
+        "near_factors": flat([g.factors for g in gathers], np.float64),
+        "near_pointer": flat([g.pointer[1:] for g in gathers], np.int64),
+        "source_length": lengths([g.sources for g in gathers]),
+        "sources": flat([g.sources for g in gathers], np.int64),
+        "weights": flat([g.weights for g in gathers], np.float32),
+    }
+
+
+def unpack_columns(packed: dict[str, np.ndarray], index: type) -> list[tuple[int, Column]]:
+    """(patch, column) pairs from :func:`pack_columns`' arrays; receiver indices as
+    ``index`` (int32 or int64), raw factors as float32."""
+    ends = {
+        name: np.concatenate([[0], np.cumsum(packed[name])])
+        for name in ("length", "near_length", "source_length")
+    }
+    out = []
+    for i, patch in enumerate(packed["patch"].tolist()):
+        a, b = ends["length"][i : i + 2]
+        g, h = ends["near_length"][i : i + 2]
+        u, v = ends["source_length"][i : i + 2]
+        gather = GatherWeights(
+            packed["near_receivers"][g:h].astype(index),
+            packed["near_factors"][g:h],
+            np.concatenate([[0], packed["near_pointer"][g:h]]).astype(np.int64),
+            packed["sources"][u:v].astype(index),
+            packed["weights"][u:v].astype(np.float32),
+        )
+        receivers: np.ndarray = packed["receivers"][a:b].astype(index)
+        out.append((patch, Column(receivers, packed["factors"][a:b].astype(np.float32), 0, gather)))
+    return out
+
+
+__all__ = ["Column", "ColumnSpill", "pack_columns", "unpack_columns"]
