@@ -37,7 +37,8 @@ class Column:
         rounding, 6e-8, is far below the sampled visibility's error, and it cannot leak
         energy, because balancing computes its row and column scales (float64) from the
         stored values themselves, so closed rows still sum to 1 and closed patches still
-        capture 1 to float64 rounding. Balanced columns (:meth:`FormFactorEngine.column`)
+        capture 1 to float64 rounding. Balanced columns
+        (:meth:`raytrad.core.formfactor.FormFactorEngine.column`)
         are float64.
     rays : int
         Visibility rays cast to compute it.
