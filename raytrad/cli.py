@@ -563,7 +563,10 @@ def _print_summary(report: dict[str, Any], outputs: dict[str, Path]) -> None:
     if refinement.get("receivers_added"):
         lines.append(
             f"refined    +{refinement['receivers_added']} receivers in "
-            f"{refinement['rounds']} rounds (solved {refinement['receivers_solved']})"
+            f"{refinement['rounds']} rounds (solved {refinement['receivers_solved']}; "
+            f"{refinement['rays']} rays, "
+            f"{_share(refinement['rays'], refinement['rays_naive'])} of "
+            f"{refinement['rays_naive']} without culling)"
         )
     lines += [f"wrote      {path}" for path in outputs.values()]
     print("\n".join(lines))

@@ -157,10 +157,13 @@ def refine_adaptively(
     changes: list[tuple[np.ndarray, np.ndarray]] = []
     for _ in range(settings.rounds):
         if stop is not None and stop():
-            log.info(
-                "refinement stopped after %d rounds (time limit spent or interrupted)",
-                out.rounds,
-            )
+            if out.rounds:
+                log.info(
+                    "refinement stopped after %d rounds (time limit spent or interrupted)",
+                    out.rounds,
+                )
+            else:
+                log.info("refinement skipped: time limit spent or interrupted")
             break
         room = budget - out.mesh.receiver_count
         order = _to_split(out.mesh, out.radiosity, settings, smallest, room)

@@ -311,7 +311,8 @@ class FormFactorEngine:
             Receivers that see no opening; None (a scene where nothing occludes, so the
             factors are exact) takes rows already summing to 1 within :data:`EXACT_ROW_SUM`.
         progress : callable or None
-            ``progress(done, total)`` while columns are computed.
+            ``progress(done, total)`` while columns are computed (columns restored from a
+            checkpoint are not counted).
         iterations : int
             Most row-and-column rounds.
         stop : callable or None
@@ -332,16 +333,19 @@ class FormFactorEngine:
         mesh = self.mesh
         total = mesh.patch_count
         columns: list[Column | None] = [None] * total
-        computed = self.raw_columns(self._pass_order())
+        order = self._pass_order()
+        known = sum(1 for p in order.tolist() if p in self._cache or p in self._spill)
+        computed = self.raw_columns(order)
         for done, (patch, col) in enumerate(computed, start=1):
             columns[patch] = col
-            if progress is not None:
-                progress(done, total)
+            if progress is not None and done > known:  # columns restored take no time
+                progress(done - known, total - known)
             if done < total and stop is not None and stop():
                 computed.close()  # cancels the columns not started
                 log.warning(
-                    "form-factor pass stopped after %d of %d columns: the rest are computed "
-                    "as shots need them, and the factors are not balanced",
+                    "form-factor pass stopped after %d of %d columns (time limit or "
+                    "interrupt): the factors are not balanced; the rest are computed on "
+                    "--resume, or as shots need them",
                     done,
                     total,
                 )

@@ -220,12 +220,11 @@ def _pass_progress() -> Callable[[int, int], None]:
         now = time.perf_counter()
         if done == 1:
             first = now
-        if now - last >= PASS_LOG_SECONDS and done < total:
+        if now - last >= PASS_LOG_SECONDS and 1 < done < total:
             last = now
-            rate = (now - first) / (done - 1) if done > 1 else now - start
-            left = rate * (total - done)
+            left = (now - first) / (done - 1) * (total - done)
             log.info(
-                "form factors: %d of %d columns in %.0f s, about %.0f s left",
+                "form factors: %d of %d columns to compute in %.0f s, about %.0f s left",
                 done,
                 total,
                 now - start,
