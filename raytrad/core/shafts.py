@@ -9,8 +9,10 @@ spirit). A facet cannot block any ray from a receiver to a patch when
 
 * the receiver and every ray target on the patch lie on the same side of its plane (a
   segment between two points on one side never crosses it), or
-* its bounding sphere misses the shaft: the capsule around the segment from the receiver to
-  the patch's centre, as wide as the patch's bounding sphere.
+* it misses the shaft: its bounding sphere is outside the capsule around the segment from
+  the receiver to the patch's centre (as wide as the patch's bounding sphere), or the
+  patch's bounding ball is wholly outside one side plane of the pyramid from the receiver
+  through the facet's convex hull (then no segment to the patch passes through it).
 
 A pair that no facet can block is *clear*: its visible fraction is exactly 1 and it needs
 no ray. The test is conservative (a pair called clear has no occluder in its shaft), so
@@ -19,16 +21,16 @@ passes. In a room, the walls, floor and ceiling never separate a receiver from a
 so only the furniture is ever tested.
 
 The per-receiver bits are packed 64 facets to a word; per (receiver, patch) pair the
-candidate facets are then a few word operations, and only those get the capsule test
-(:func:`~raytrad.core.kernels.shaft_clear`, compiled). Scenes with more than
+candidate facets are then a few word operations, and only those get the capsule and
+pyramid tests (:func:`~raytrad.core.kernels.shaft_clear`, compiled). Scenes with more than
 :data:`MAX_FACETS` facets (curved, finely tessellated surfaces) are not culled: every pair
 is traced, as before.
 
 References
 ----------
 Haines, E. A. and Wallace, J. R. (1994). Shaft culling for efficient ray-traced radiosity.
-In *Photorealistic Rendering in Computer Graphics* (Eurographics Workshop on Rendering
-1991), pp. 122-138.
+In *Photorealistic Rendering in Computer Graphics* (Proceedings of the second Eurographics
+Workshop on Rendering, 1991), Springer.
 """
 
 from __future__ import annotations
