@@ -54,8 +54,9 @@ class Column:
 
     @property
     def nbytes(self) -> int:
-        """Memory the column holds [bytes]."""
-        return int(self.receivers.nbytes + self.factors.nbytes + self.gather.nbytes + 64)
+        """Memory the cache counts for the column [bytes]: its receivers and factors (the
+        near-field gather weights are kept apart, whether the column is cached or not)."""
+        return int(self.receivers.nbytes + self.factors.nbytes + 64)
 
 
 class ColumnSpill:

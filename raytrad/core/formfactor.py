@@ -211,7 +211,7 @@ class FormFactorEngine:
             self._row_sum[col.receivers] += col.factors
             if len(col.receivers) and self._row_scale is None:
                 self.max_row_sum = max(self.max_row_sum, float(self._row_sum[col.receivers].max()))
-        size = int(col.receivers.nbytes + col.factors.nbytes + 64)  # gathers are kept anyway
+        size = col.nbytes
         if self._cached_bytes + size <= self.cache_bytes:
             self._cache[patch] = col
             self._cached_bytes += size

@@ -58,11 +58,6 @@ class GatherWeights:
     sources: np.ndarray
     weights: np.ndarray
 
-    @property
-    def nbytes(self) -> int:
-        arrays = (self.receivers, self.factors, self.pointer, self.sources, self.weights)
-        return int(sum(a.nbytes for a in arrays))
-
     def gathered(self, radiosity: np.ndarray) -> np.ndarray:
         """(G, 3) radiosity each near receiver sees on the patch [W m-2]."""
         values = self.weights[:, None] * radiosity[self.sources]
