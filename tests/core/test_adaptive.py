@@ -8,10 +8,22 @@ from collections.abc import Callable
 import numpy as np
 import pytest
 
-from raytrad.core.adaptive import RefineSettings, refine_adaptively, subdivide
+from raytrad.core.adaptive import Refinement, RefineSettings, refine_adaptively, subdivide
 from raytrad.core.formfactor import FormFactorEngine
 from raytrad.core.pipeline import Prepared
 from raytrad.core.solver import SolveResult, SolveSettings, solve
+
+
+def _refine(prepared: Prepared, result: SolveResult, settings: RefineSettings) -> Refinement:
+    """Adaptive refinement of ``result`` on the prepared scene's own mesh and engine."""
+    return refine_adaptively(
+        prepared.scene,
+        prepared.mesh,
+        prepared.engine,
+        prepared.occluder,
+        result.radiosity,
+        settings,
+    )
 
 
 def _open_edge_length(positions: np.ndarray, triangles: np.ndarray) -> float:
@@ -83,14 +95,7 @@ def test_refined_engine_gathers_as_a_fresh_one(
 def test_uniform_light_needs_no_refinement(prepare_furnace: Callable[..., Prepared]) -> None:
     prepared = prepare_furnace(0.5, 1.0)
     result = solve(prepared.mesh, prepared.engine, SolveSettings())
-    out = refine_adaptively(
-        prepared.scene,
-        prepared.mesh,
-        prepared.engine,
-        prepared.occluder,
-        result.radiosity,
-        RefineSettings(),
-    )
+    out = _refine(prepared, result, RefineSettings())
     assert out.added == 0 and out.mesh is prepared.mesh
 
 
@@ -100,14 +105,7 @@ def test_refinement_goes_to_shadow_edges_within_budget(
     prepared, result = cornell_fine
     mesh = prepared.mesh
     budget = mesh.receiver_count + 1500
-    out = refine_adaptively(
-        prepared.scene,
-        mesh,
-        prepared.engine,
-        prepared.occluder,
-        result.radiosity,
-        RefineSettings(max_receivers=budget),
-    )
+    out = _refine(prepared, result, RefineSettings(max_receivers=budget))
     assert 0 < out.added <= 1500 and out.mesh.receiver_count == mesh.receiver_count + out.added
     assert sum(out.by_object.values()) <= out.added
     assert np.isfinite(out.radiosity).all() and (out.radiosity >= 0).all()
@@ -130,14 +128,7 @@ def test_the_receiver_budget_is_never_exceeded(
 ) -> None:
     prepared, result = cornell_fine
     budget = prepared.mesh.receiver_count + extra
-    out = refine_adaptively(
-        prepared.scene,
-        prepared.mesh,
-        prepared.engine,
-        prepared.occluder,
-        result.radiosity,
-        RefineSettings(max_receivers=budget),
-    )
+    out = _refine(prepared, result, RefineSettings(max_receivers=budget))
     assert out.mesh.receiver_count <= budget  # a split's closure splits neighbours too
 
 
@@ -145,12 +136,5 @@ def test_a_budget_below_the_solved_receivers_says_so(
     cornell_fine: tuple[Prepared, SolveResult], caplog: pytest.LogCaptureFixture
 ) -> None:
     prepared, result = cornell_fine
-    out = refine_adaptively(
-        prepared.scene,
-        prepared.mesh,
-        prepared.engine,
-        prepared.occluder,
-        result.radiosity,
-        RefineSettings(max_receivers=prepared.mesh.receiver_count - 10),
-    )
+    out = _refine(prepared, result, RefineSettings(max_receivers=prepared.mesh.receiver_count - 10))
     assert out.added == 0 and "no refinement: the receiver budget" in caplog.text
