@@ -1,16 +1,14 @@
 """The Python API: load -> prepare -> solve -> write, in one call or step by step.
 
 >>> from raytrad import api
->>> from raytrad.settings import MeshSettings, RenderSettings
 >>> outcome = api.render("scenes/cornell-box.obj", "out")          # doctest: +SKIP
 >>> outcome.result.radiosity.shape                                  # doctest: +SKIP
 (20184, 3)
 >>> loaded = api.load("scenes/furnace.obj")                         # doctest: +SKIP
 >>> prepared, result = api.solve_scene(loaded.scene)                # nothing written
 
-Each step lives in its own layer (``docs/architecture.md``): scene files
-(:mod:`raytrad.scenefiles`), the radiosity core (:mod:`raytrad.core`), bake products
-(:mod:`raytrad.products`) and outputs (:mod:`raytrad.outputs`); this module only joins them.
+Each step lives in its own layer (``docs/architecture.md``): scene files, the radiosity
+core, bake products and outputs; this module only joins them.
 """
 
 from __future__ import annotations
@@ -110,8 +108,10 @@ def load(path: str | os.PathLike[str], settings: RenderSettings | None = None) -
     (:func:`~raytrad.products.lightmap.choose_lightmap_uvs`).
     """
     settings = settings or RenderSettings()
-    uv_set = None if settings.lightmap is None else settings.lightmap.uv_set_to_read
-    loaded = load_scene_file(path, settings.scale, uv_set, cameras=settings.image is not None)
+    uv_set = settings.lightmap.uv_set_to_read if settings.lightmap else None
+    loaded = load_scene_file(
+        path, settings.scale, uv_set, settings.image is not None, settings.allow_outside_files
+    )
     scene = choose_lightmap_uvs(loaded.scene, settings.lightmap)
     return SceneFile(scene, loaded.cameras, loaded.output, loaded.kind)
 
@@ -357,7 +357,7 @@ def compare(
             f"choose from {', '.join(SHOOTING_METHODS)}"
         )
     scene_path, output_dir = Path(scene_path), Path(output_dir)
-    prepared = prepare(load_scene_file(scene_path, settings.scale).scene, settings)
+    prepared = prepare(load(scene_path, settings).scene, settings)
     runs: list[MethodRun] = []
     try:
         if reference:

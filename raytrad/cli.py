@@ -335,6 +335,12 @@ def _add_common(parser: argparse.ArgumentParser, default_tolerance: float) -> No
         "(default: %(default)s)",
     )
     add(
+        "--allow-outside-files",
+        action="store_true",
+        help="read files the scene refers to (buffers, mtllib, TOML meshes) even outside "
+        "the scene file's folder",
+    )
+    add(
         "--cache-mb",
         type=float,
         default=RenderSettings().cache_mb,
@@ -479,6 +485,7 @@ def _settings(args: argparse.Namespace, method: str) -> RenderSettings:
             omega=args.omega,
         ),
         scale=args.scale,
+        allow_outside_files=args.allow_outside_files,
         cache_mb=args.cache_mb,
         **extra,
     )

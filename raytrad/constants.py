@@ -90,6 +90,10 @@ class Tolerances:
 #: The tolerances raytrad uses.
 tol = Tolerances()
 
+FLOAT32_MAX = float(np.finfo(np.float32).max)
+"""The largest float32 [1]: outputs (PLY, EXR, glTF) hold float32, so coordinates and
+emission beyond it are refused on load."""
+
 
 @dataclass(frozen=True)
 class Defaults:
@@ -154,6 +158,7 @@ def sign_with_band(value: np.ndarray, band: np.ndarray | float) -> np.ndarray:
 
 
 __all__ = [
+    "FLOAT32_MAX",
     "Defaults",
     "Tolerances",
     "defaults",

@@ -102,6 +102,9 @@ class RenderSettings:
         Render the solution from a camera (linear EXR and display PNG).
     gltf : bool
         Write the baked model as ``.glb``.
+    allow_outside_files : bool
+        Read files the scene refers to (buffers, ``mtllib``, TOML meshes) that lie
+        outside the scene file's folder; refused by default.
     """
 
     mesh: MeshSettings = field(default_factory=MeshSettings)
@@ -114,6 +117,7 @@ class RenderSettings:
     lightmap: LightmapSettings | None = None
     image: ImageSettings | None = None
     gltf: bool = False
+    allow_outside_files: bool = False
 
     def __post_init__(self) -> None:
         if not (self.scale > 0 and math.isfinite(self.scale)):

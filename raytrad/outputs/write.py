@@ -10,7 +10,7 @@ from typing import Any
 
 import numpy as np
 
-from raytrad.constants import defaults
+from raytrad.constants import FLOAT32_MAX, defaults
 from raytrad.core.pipeline import Prepared
 from raytrad.core.solver import SolveResult
 from raytrad.errors import SolverError
@@ -119,7 +119,7 @@ def _write_image(
 def check_output_range(radiosity: np.ndarray, scene_path: Path) -> None:
     """Refuse, before anything is written, a radiosity the float32 outputs cannot hold."""
     peak = float(np.abs(radiosity).max(initial=0.0))
-    if not peak < float(np.finfo(np.float32).max) / 1e3:
+    if not peak < FLOAT32_MAX / 1e3:
         raise SolverError(
             f"{scene_path}: radiosity reaches {peak:.3g} W m-2, beyond the float32 range of "
             "the outputs (lower the emission or use --scale)"

@@ -124,13 +124,20 @@ def _aligning_quietly() -> Iterator[None]:
 # --------------------------------------------------------------------------- reflectance
 
 _ASTM_E308_INTERVALS = (1.0, 5.0, 10.0, 20.0)
+_ASTM_E308_SAMPLES = 6
+"""The fewest samples colour-science's ASTM E308 integration takes."""
+_VISIBLE_NM = (380.0, 780.0)
+"""Wavelengths a reflectance spectrum must overlap [nm]."""
+_CMF_NM = (360, 830)
+"""The range of the CIE 1931 colour-matching functions [nm]."""
 
 
 def _spectral_domain(wavelengths_nm: ArrayLike, values: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
     """Validated wavelengths (n,) and values (..., n), on a grid ASTM E308 accepts.
 
-    Samples at a regular 1, 5, 10 or 20 nm interval are kept; any other sampling is
-    resampled linearly to whole nanometres (held constant beyond its ends).
+    At least 6 samples at a regular 1, 5, 10 or 20 nm interval are kept; any other
+    sampling is resampled linearly to whole nanometres over at least 360-830 nm
+    (held constant beyond its ends). Wavelengths must overlap 380-780 nm (ValueError).
     """
     wavelengths = np.asarray(wavelengths_nm, dtype=np.float64)
     spectrum = np.asarray(values, dtype=np.float64)
@@ -148,10 +155,21 @@ def _spectral_domain(wavelengths_nm: ArrayLike, values: ArrayLike) -> tuple[np.n
         raise ValueError("wavelengths must increase strictly")
     if not np.isfinite(spectrum).all():
         raise ValueError("values must be finite")
+    if wavelengths[-1] <= _VISIBLE_NM[0] or wavelengths[0] >= _VISIBLE_NM[1]:
+        raise ValueError(
+            f"wavelengths {wavelengths[0]:g}-{wavelengths[-1]:g} nm must overlap "
+            f"{_VISIBLE_NM[0]:g}-{_VISIBLE_NM[1]:g} nm"
+        )
     regular = np.allclose(steps, steps[0], rtol=0.0, atol=1e-9)
-    if regular and any(math.isclose(steps[0], s) for s in _ASTM_E308_INTERVALS):
+    enough = len(wavelengths) >= _ASTM_E308_SAMPLES
+    if enough and regular and any(math.isclose(steps[0], s) for s in _ASTM_E308_INTERVALS):
         return wavelengths, spectrum
-    grid = np.arange(math.floor(wavelengths[0]), math.ceil(wavelengths[-1]) + 1.0)
+    # Whole nanometres over the colour-matching functions' range at least, so that a
+    # narrow or partial spectrum still has the samples ASTM E308 integration needs.
+    grid = np.arange(
+        min(math.floor(wavelengths[0]), _CMF_NM[0]),
+        max(math.ceil(wavelengths[-1]), _CMF_NM[1]) + 1.0,
+    )
     rows = spectrum.reshape(-1, len(wavelengths))
     resampled = np.stack([np.interp(grid, wavelengths, row) for row in rows])
     return grid, resampled.reshape(*spectrum.shape[:-1], len(grid))

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from raytrad.constants import tol
+from raytrad.constants import FLOAT32_MAX, tol
 from raytrad.errors import SceneError
 
 log = logging.getLogger(__name__)
@@ -248,6 +248,14 @@ def validate_scene(scene: Scene) -> Scene:
             f"{int(bad.sum())} vertices have NaN or infinite coordinates "
             f"(first: vertex {int(used[bad][0])})",
         )
+    huge = np.abs(scene.positions[used]).max(axis=1) > FLOAT32_MAX
+    if huge.any():
+        raise SceneError(
+            src,
+            f"{int(huge.sum())} vertices have coordinates beyond the float32 range "
+            f"(first: vertex {int(used[huge][0])} at {scene.positions[used[huge][0]].tolist()}); "
+            "check the units or --scale",
+        )
     nm = len(scene.material_names)
     if scene.material_index.min() < 0 or scene.material_index.max() >= nm:
         raise SceneError(src, "a face refers to a material that does not exist")
@@ -262,6 +270,12 @@ def validate_scene(scene: Scene) -> Scene:
         if not np.isfinite(emission).all() or emission.min() < 0.0:
             raise SceneError(
                 src, f"material {name!r}: emission {emission.tolist()} must be finite and >= 0"
+            )
+        if emission.max() > FLOAT32_MAX:
+            raise SceneError(
+                src,
+                f"material {name!r}: emission {emission.tolist()} W m-2 is beyond the float32 "
+                "range of the outputs",
             )
     corners = scene.triangle_vertices()
     areas, _ = triangle_areas_normals(corners)

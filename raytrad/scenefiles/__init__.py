@@ -18,6 +18,8 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import numpy as np
+
 from raytrad.errors import SceneError, SettingsError
 from raytrad.scene import NamedCamera, Scene
 from raytrad.scenefiles.common import Collected, ReadOptions, checked_path
@@ -74,6 +76,7 @@ def load_scene_file(
     scale: float = 1.0,
     uv_set: int | None = None,
     cameras: bool = False,
+    allow_outside: bool = False,
 ) -> SceneFile:
     """Read a scene file, dispatching on its suffix through :data:`READERS`.
 
@@ -89,6 +92,9 @@ def load_scene_file(
         without it get NaN UVs. None reads no UVs.
     cameras : bool
         Also read a glTF file's cameras (a TOML ``[camera]`` is always read).
+    allow_outside : bool
+        Read referenced files (buffers, ``mtllib``, TOML meshes) that lie outside the
+        scene file's folder; refused by default.
 
     Returns
     -------
@@ -112,11 +118,15 @@ def load_scene_file(
             path, f"unsupported file type {path.suffix or '(no suffix)'!r}; use one of {supported}"
         )
     kind, reader = entry
-    try:
-        collected = reader(path, ReadOptions(scale, uv_set, cameras))
-    except OSError as exc:
-        raise SceneError(path, f"cannot read the file: {exc.strerror or exc}") from exc
-    scene = collected.to_scene()
+    # Overflowing or invalid values are reported by name below, not as numpy warnings.
+    with np.errstate(all="ignore"):
+        try:
+            collected = reader(path, ReadOptions(scale, uv_set, cameras, allow_outside))
+        except OSError as exc:
+            raise SceneError(path, f"cannot read the file: {exc.strerror or exc}") from exc
+        except RecursionError:
+            raise SceneError(path, "cannot parse: nesting too deep") from None
+        scene = collected.to_scene()
     log.info(
         "%s: %d triangles, %d materials%s",
         path,
@@ -128,15 +138,18 @@ def load_scene_file(
 
 
 def load_scene(
-    path: str | os.PathLike[str], scale: float = 1.0, uv_set: int | None = None
+    path: str | os.PathLike[str],
+    scale: float = 1.0,
+    uv_set: int | None = None,
+    allow_outside: bool = False,
 ) -> Scene:
     """The scene of a scene file (see :func:`load_scene_file`)."""
-    return load_scene_file(path, scale, uv_set).scene
+    return load_scene_file(path, scale, uv_set, allow_outside=allow_outside).scene
 
 
-def _load_mesh(path: Path, uv_set: int | None) -> Scene:
+def _load_mesh(path: Path, options: ReadOptions) -> Scene:
     """How a TOML ``[[mesh]]`` file is read: any other supported file, in metres."""
-    return load_scene(path, 1.0, uv_set)
+    return load_scene(path, 1.0, options.uv_set, allow_outside=options.allow_outside)
 
 
 __all__ = [

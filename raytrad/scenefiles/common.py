@@ -11,9 +11,11 @@ emitted exitance is [W m-2].
 
 from __future__ import annotations
 
+import errno
 import logging
 import math
 import os
+import stat
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -42,11 +44,15 @@ class ReadOptions:
         ``vt`` and PLY ``s, t`` are set 0); None reads no UVs.
     cameras : bool
         Read the file's cameras (glTF); a TOML ``[camera]`` is always read.
+    allow_outside : bool
+        Read files the scene refers to (buffers, ``mtllib``, TOML meshes) even when they
+        lie outside the scene file's folder; refused by default.
     """
 
     scale: float = 1.0
     uv_set: int | None = None
     cameras: bool = False
+    allow_outside: bool = False
 
 
 @dataclass(frozen=True)
@@ -163,6 +169,54 @@ def checked_path(path: str | os.PathLike[str], scale: float) -> tuple[Path, floa
     if not path.is_file():
         raise SceneError(path, "not a regular file")
     return path, scale
+
+
+def read_reference(
+    scene_path: Path, name: str, what: str, allow_outside: bool = False
+) -> bytes | None:
+    """The bytes of a file a scene file refers to by a relative name, None when missing.
+
+    Parameters
+    ----------
+    scene_path : Path
+        The scene file; ``name`` is relative to its folder.
+    name : str
+        The reference as the file writes it (an absolute path is allowed only with
+        ``allow_outside``).
+    what : str
+        What refers to it, for messages (``"mtllib"``, ``"buffer 0"``, ...).
+    allow_outside : bool
+        Read it even when it resolves (symbolic links followed) outside the scene's folder.
+
+    Raises
+    ------
+    SceneError
+        The file lies outside the scene folder, is not a regular file (a FIFO would block
+        the read forever, so it is opened without blocking and refused), or cannot be read.
+    """
+    folder = scene_path.parent.resolve()
+    target = (scene_path.parent / name).resolve()
+    if not allow_outside and not target.is_relative_to(folder):
+        raise SceneError(
+            scene_path,
+            f"{what} {name!r} lies outside the scene folder {str(folder)!r} "
+            "(--allow-outside-files reads it)",
+        )
+    try:
+        fd = os.open(target, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0))
+    except FileNotFoundError:
+        return None
+    except OSError as exc:
+        if exc.errno in (errno.ENOTDIR, errno.ENAMETOOLONG):
+            return None
+        raise SceneError(scene_path, f"{what} {name!r}: {exc.strerror or exc}") from None
+    with os.fdopen(fd, "rb") as f:
+        if not stat.S_ISREG(os.fstat(fd).st_mode):
+            raise SceneError(scene_path, f"{what} {name!r} is not a regular file")
+        try:
+            return f.read()
+        except OSError as exc:
+            raise SceneError(scene_path, f"{what} {name!r}: {exc.strerror or exc}") from None
 
 
 def reason(exc: BaseException) -> str:

@@ -80,7 +80,8 @@ def parse_json(path: Path, data: bytes, label: str) -> Any:
         return json.loads(data.decode("utf-8-sig"))
     except (ValueError, RecursionError) as exc:  # JSONDecodeError, UnicodeDecodeError
         where = "bad JSON chunk: " if label == "GLB" else ""
-        raise SceneError(path, f"cannot parse as {label}: {where}{reason(exc)}") from None
+        why = "nesting too deep" if isinstance(exc, RecursionError) else reason(exc)
+        raise SceneError(path, f"cannot parse as {label}: {where}{why}") from None
 
 
 def _split(path: Path, data: bytes) -> tuple[bytes, bytes]:
@@ -186,6 +187,12 @@ def _gltf_material(collected: Collected, index: int, spec: dict[str, Any]) -> Ma
     if not isinstance(strength, int | float) or isinstance(strength, bool):
         raise SceneError(path, f"{what}: emissiveStrength {strength!r} is not a number")
     emitted = math.pi * (factor * float(strength))
+    if not np.isfinite(emitted).all():
+        raise SceneError(
+            path,
+            f"{what}: emission pi x emissiveFactor {factor.tolist()} x emissiveStrength "
+            f"{strength} overflows",
+        )
     if "baseColorTexture" in pbr or "emissiveTexture" in spec:
         collected.warn_once(
             "texture", "material textures are ignored; their constant factors are used"

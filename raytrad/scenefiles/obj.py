@@ -2,11 +2,13 @@
 
 ``Kd`` is the diffuse reflectance [1] and ``Ke`` the emitted exitance [W m-2]. Objects are
 ``o`` statements, or ``g`` groups in a file without any ``o``; ``vt`` coordinates are UV
-set 0.
+set 0. The OBJ and MTL text is read by :mod:`raytrad.scenefiles.obj_text`; trimesh gets
+plain triangles and material names only.
 """
 
 from __future__ import annotations
 
+import logging
 import re
 from pathlib import Path
 from typing import Any
@@ -18,13 +20,14 @@ from raytrad.scenefiles.common import (
     Collected,
     Material,
     ReadOptions,
-    rgb_of,
+    read_reference,
 )
+from raytrad.scenefiles.obj_text import normalise_obj, parse_mtl
+
+log = logging.getLogger(__name__)
+Colour = tuple[float, float, float]
 
 _DEFAULT_MATERIAL = Material("default", (DEFAULT_REFLECTANCE,) * 3)
-_SCALAR_COLOUR = re.compile(
-    rb"^([ \t]*K[ads][ \t]+)(\S+)[ \t]*(\r?)$", re.IGNORECASE | re.MULTILINE
-)
 _STAND_IN_MTL = b"__raytrad_objects__.mtl"
 _OBJECT_TAG = re.compile(r"^(.*)__raytrad_object_(\d+)__$", re.DOTALL)
 _OBJECT_LINE = re.compile(rb"^[ \t]*(o|g|usemtl)(?:[ \t]+([^\r\n]*?))?[ \t]*(\r?)$", re.MULTILINE)
@@ -33,28 +36,30 @@ _OBJECT_LINE = re.compile(rb"^[ \t]*(o|g|usemtl)(?:[ \t]+([^\r\n]*?))?[ \t]*(\r?
 def read_obj(path: Path, options: ReadOptions) -> Collected:
     """OBJ geometry through trimesh; ``Kd`` (reflectance) and ``Ke`` [W m-2] from the MTL.
 
-    ``vt`` coordinates are UV set 0. trimesh keeps them per corner only when it may split
-    vertices by (v, vt) pair (``maintain_order=False``), so that is how UVs are read.
+    The OBJ is normalised first (:func:`~raytrad.scenefiles.obj_text.normalise_obj`) and
+    the MTL files read by raytrad (:func:`~raytrad.scenefiles.obj_text.parse_mtl`);
+    trimesh sees only material names. ``vt`` coordinates are UV set 0. trimesh keeps them
+    per corner only when it may split vertices by (v, vt) pair (``maintain_order=False``),
+    so that is how UVs are read.
     """
     data = path.read_bytes()
     if b"\0" in data:
         raise SceneError(path, "cannot parse as OBJ: binary data (NUL bytes), not OBJ text")
-    # Undecodable bytes (a Latin-1 comment, say) become U+FFFD instead of failing in trimesh.
-    text = data.decode("utf-8", errors="replace").encode("utf-8")
-    text, object_names, material_objects = _tag_objects(text)
-    mtl = _MtlRewriter(material_objects)
+    # Undecodable bytes (a Latin-1 comment, say) become U+FFFD instead of failing.
+    normalised = normalise_obj(path, data.decode("utf-8", errors="replace"))
     collected = Collected(path, options)
+    declared = _read_mtllibs(collected, normalised.mtllibs)
+    text, object_names, material_objects = _tag_objects(normalised.text)
+    stand_in = _stand_in_mtl(text, declared, material_objects)
     tm_scene = trimesh_adapter.parse_scene(
         path,
-        text,
+        b"mtllib " + _STAND_IN_MTL + b"\n" + text,
         "obj",
         "OBJ",
-        resolver=trimesh_adapter.file_resolver(path.parent, mtl),
+        resolver=trimesh_adapter.bytes_resolver({_STAND_IN_MTL.decode(): stand_in}),
         group_material=True,
         maintain_order=options.uv_set != 0,
     )
-    if not mtl.declared and re.search(rb"^[ \t]*mtllib", data, re.MULTILINE):
-        collected.warn_once("mtllib", "its mtllib file is missing or declares no materials")
 
     def object_of(node: str, geometry: Any) -> str | None:
         tagged = _OBJECT_TAG.match(trimesh_adapter.material_name(geometry) or "")
@@ -63,12 +68,54 @@ def read_obj(path: Path, options: ReadOptions) -> Collected:
     trimesh_adapter.add_trimesh_scene(
         collected,
         tm_scene,
-        lambda g: _obj_material(collected, mtl.declared, g),
+        lambda g: _obj_material(collected, declared, g),
         object_of,
         uv_available=options.uv_set == 0,
         node_order=object_names,
     )
     return collected
+
+
+def _read_mtllibs(collected: Collected, names: list[str]) -> dict[str, dict[str, Colour]]:
+    """The materials of every ``mtllib`` file (the first definition of a name wins).
+
+    A missing file is warned about; one outside the scene folder or not a regular file is
+    an error (:func:`~raytrad.scenefiles.common.read_reference`). A name with spaces is
+    tried whole first, then as several files.
+    """
+    path = collected.path
+    materials: dict[str, dict[str, Colour]] = {}
+    for statement in names:
+        files = [statement] if (path.parent / statement).is_file() else statement.split()
+        for name in files:
+            data = read_reference(path, name, "mtllib", collected.options.allow_outside)
+            if data is None:
+                collected.warn_once(f"mtllib:{name}", "mtllib %r not found", name)
+                continue
+            label = f"{(path.parent / name).as_posix()}"
+            for material, values in parse_mtl(label, data, log.warning).items():
+                materials.setdefault(material, values)
+    return materials
+
+
+def _stand_in_mtl(
+    text: bytes, declared: dict[str, dict[str, Colour]], material_objects: dict[str, set[int]]
+) -> bytes:
+    """The MTL trimesh reads: every material name, declared or used, with no values, and
+    the object-tagged copies of :func:`_tag_objects`."""
+    used = {
+        m.group(1).decode("utf-8")
+        for m in re.finditer(rb"^usemtl ([^\r\n]*)$", text, re.MULTILINE)
+        if not _OBJECT_TAG.match(m.group(1).decode("utf-8"))
+    }
+    names = sorted(set(declared) | used)
+    plain = "".join(f"newmtl {name}\nKd 1 1 1\n" for name in names)
+    tagged = "".join(
+        f"newmtl {base}__raytrad_object_{k}__\nKd 1 1 1\n"
+        for base, objects in sorted(material_objects.items())
+        for k in sorted(objects)
+    )
+    return (plain + tagged).encode("utf-8")
 
 
 def _tag_objects(text: bytes) -> tuple[bytes, list[str], dict[str, set[int]]]:
@@ -78,8 +125,7 @@ def _tag_objects(text: bytes) -> tuple[bytes, list[str], dict[str, set[int]]]:
     goes into the material name: ``usemtl M`` inside object ``k`` becomes ``usemtl
     M__raytrad_object_k__``, and each ``o`` line restates the current material, tagged.
     Objects are ``o`` statements, or ``g`` groups in a file without any ``o``; a file with
-    neither is returned unchanged. A file without ``mtllib`` gets one naming a stand-in
-    MTL file, which :class:`_MtlRewriter` fills with the tagged names.
+    neither is returned unchanged. :func:`_stand_in_mtl` declares the tagged names.
 
     Returns
     -------
@@ -94,8 +140,6 @@ def _tag_objects(text: bytes) -> tuple[bytes, list[str], dict[str, set[int]]]:
         return text, [], {}
     tagger = _ObjectTagger(keyword)
     text = _OBJECT_LINE.sub(tagger, text)
-    if not re.search(rb"^[ \t]*mtllib[ \t]", text, re.MULTILINE):
-        text = b"mtllib " + _STAND_IN_MTL + b"\n" + text  # to declare the tagged names
     return text, tagger.names, tagger.used
 
 
@@ -128,85 +172,26 @@ class _ObjectTagger:
         return match.group(0) + b"\n" + self.tagged() + cr
 
 
-class _MtlRewriter:
-    """Fixes MTL text for trimesh and notes the materials it declares.
-
-    The MTL format allows ``Kd r`` for ``Kd r r r``, but trimesh 5.2 then fails to build
-    every material of the file (silently), so one-number ``Kd``/``Ka``/``Ks`` lines are
-    repeated to three numbers. The ``newmtl`` names read are kept in :attr:`declared` to
-    tell MTL materials from the placeholder trimesh gives faces that have none. Each
-    material of ``material_objects`` is repeated under the object-tagged names of
-    :func:`_tag_objects` (with an empty body when the MTL lacks it), so every tagged face
-    group keeps its name through trimesh, which reads only the file's first ``mtllib``.
-    """
-
-    def __init__(self, material_objects: dict[str, set[int]]) -> None:
-        self.material_objects = material_objects
-        self.declared: set[str] = set()
-
-    def __call__(self, name: str, data: bytes | None) -> bytes:
-        is_mtl = name.lower().endswith(".mtl")
-        if data is None:
-            if not self.material_objects or not is_mtl:
-                raise OSError(f"{name}: not found")
-            data = b""  # a missing (or the stand-in) MTL still carries the objects
-        if not is_mtl:
-            return data
-        data = _SCALAR_COLOUR.sub(rb"\1\2 \2 \2\3", data)
-        text = data.decode("utf-8", errors="replace")
-        real = {
-            " ".join(words[1:])
-            for words in (line.split() for line in text.splitlines())
-            if len(words) > 1 and words[0].lower() == "newmtl"
-        }
-        self.declared.update(real)
-        return data + _tagged_copies(data, self.material_objects)
-
-
-def _tagged_copies(mtl: bytes, material_objects: dict[str, set[int]]) -> bytes:
-    """MTL blocks repeated under the object-tagged names of :func:`_tag_objects`.
-
-    A material the MTL declares is copied with its body; one it lacks (or no material,
-    ``""``) gets an empty block, read as the grey default.
-    """
-    bodies: dict[str, bytes] = {}
-    for block in re.split(rb"(?m)^(?=[ \t]*newmtl[ \t])", mtl):
-        head, _, body = block.partition(b"\n")
-        words = head.decode("utf-8", errors="replace").split()
-        if len(words) > 1 and words[0].lower() == "newmtl":
-            bodies.setdefault(" ".join(words[1:]), body)
-    copies = [
-        f"\nnewmtl {base}__raytrad_object_{k}__\n".encode() + bodies.get(base, b"")
-        for base, objects in sorted(material_objects.items())
-        for k in sorted(objects)
-    ]
-    return b"".join(copies)
-
-
-def _obj_material(collected: Collected, declared: set[str], geometry: Any) -> Material:
+def _obj_material(
+    collected: Collected, declared: dict[str, dict[str, Colour]], geometry: Any
+) -> Material:
     """The MTL material of one trimesh geometry, or the grey default (warned once)."""
-    values = trimesh_adapter.material_values(geometry)
     name = trimesh_adapter.material_name(geometry)
     tagged = _OBJECT_TAG.match(name) if name is not None else None
     name = name if tagged is None else tagged.group(1)
-    if values is None or name not in declared:
+    if name is None or name not in declared:
         collected.warn_once(
             "default",
             "faces without an MTL material get reflectance %s grey and no emission",
             DEFAULT_REFLECTANCE,
         )
         return _DEFAULT_MATERIAL
-    name = str(name)
-    path = collected.path
+    values = declared[name]
     if "kd" in values:
-        reflectance = rgb_of(path, values["kd"], f"material {name!r} Kd")
+        reflectance = values["kd"]
     else:
         collected.warn_once(
             f"kd:{name}", "material %r has no Kd; using reflectance %s", name, DEFAULT_REFLECTANCE
         )
         reflectance = (DEFAULT_REFLECTANCE,) * 3
-    emission = values.get("ke")
-    emitted = (
-        (0.0, 0.0, 0.0) if emission is None else rgb_of(path, emission, f"material {name!r} Ke")
-    )
-    return Material(name, reflectance, emitted, double_sided=False)
+    return Material(name, reflectance, values.get("ke", (0.0, 0.0, 0.0)), double_sided=False)

@@ -24,6 +24,10 @@ from raytrad.scenefiles.common import (
     reason,
     used_vertices,
 )
+from raytrad.scenefiles.polygons import triangulate_polygons
+
+_FORMATS = ("ascii", "binary_little_endian", "binary_big_endian")
+_HEADER_LIMIT = 1 << 20
 
 _REFLECTANCE_PROPERTIES = ("reflectance_r", "reflectance_g", "reflectance_b")
 _EMISSION_PROPERTIES = ("emitted_exitance_r", "emitted_exitance_g", "emitted_exitance_b")
@@ -31,14 +35,14 @@ _COLOUR_PROPERTIES = ("red", "green", "blue")
 
 
 def read_ply(path: Path, options: ReadOptions) -> Collected:
-    """PLY polygons (fan-triangulated) with per-face materials.
+    """PLY polygons (convex or not) with per-face materials.
 
     Face properties ``reflectance_r/g/b`` [1] and ``emitted_exitance_r/g/b`` [W m-2], else
     ``red/green/blue`` uchar colours decoded from sRGB, else one grey default material.
     UV set 0 is the vertex properties ``s, t``, ``u, v`` or ``texture_u, texture_v`` (v up,
     as MeshLab and Blender write them).
     """
-    raw = trimesh_adapter.read_ply_elements(path)
+    raw = read_ply_elements(path)
     try:
         positions = np.column_stack([raw["vertex"]["data"][a] for a in "xyz"])
     except Exception as exc:  # a vertex element without x, y, z
@@ -52,9 +56,14 @@ def read_ply(path: Path, options: ReadOptions) -> Collected:
     indices = columns.get("vertex_indices", columns.get("vertex_index"))
     if indices is None:
         raise SceneError(path, "PLY faces have no 'vertex_indices' list")
-    triangles, source_face = _fan_triangulate(indices)
-    if triangles.size and (triangles.min() < 0 or triangles.max() >= len(positions)):
+    corners = [np.asarray(c, dtype=np.int64).ravel() for c in indices]
+    flat = np.concatenate(corners) if corners else np.empty(0, np.int64)
+    if flat.size and (flat.min() < 0 or flat.max() >= len(positions)):
         raise SceneError(path, f"a face refers to a vertex outside 0..{len(positions) - 1}")
+    with np.errstate(all="ignore"):  # non-finite coordinates are reported later
+        triangles, source_face = triangulate_polygons(
+            positions, indices if indices.dtype != object else corners
+        )
     face_materials, materials = _ply_face_materials(collected, columns, len(indices))
     triangle_material = face_materials[source_face]
     for m, material in enumerate(materials):
@@ -93,40 +102,6 @@ def _ply_face_columns(data: Any) -> dict[str, np.ndarray]:
     return columns
 
 
-def _fan_triangulate(polygons: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Fan triangles of PLY polygons, in face order.
-
-    Parameters
-    ----------
-    polygons : (F, k) int or (F,) object array of int arrays
-        Vertex indices per face; faces with fewer than 3 corners are dropped.
-
-    Returns
-    -------
-    triangles : (T, 3) int64
-    source_face : (T,) int64
-        The face each triangle came from.
-    """
-    if polygons.dtype != object and polygons.ndim == 2:
-        groups = {polygons.shape[1]: (np.arange(len(polygons)), polygons.astype(np.int64))}
-    else:
-        lengths = np.array([len(p) for p in polygons], dtype=np.int64)
-        groups = {}
-        for k in np.unique(lengths[lengths >= 3]).tolist():
-            faces = np.flatnonzero(lengths == k)
-            groups[k] = (faces, np.stack([polygons[i] for i in faces]).astype(np.int64))
-    triangles, sources = [np.empty((0, 3), np.int64)], [np.empty(0, np.int64)]
-    for k, (faces, corners) in groups.items():
-        if k < 3:
-            continue
-        fan = np.stack([corners[:, [0, j, j + 1]] for j in range(1, k - 1)], axis=1)
-        triangles.append(fan.reshape(-1, 3))
-        sources.append(np.repeat(faces, k - 2))
-    triangle_array, source = np.concatenate(triangles), np.concatenate(sources)
-    order = np.argsort(source, kind="stable")
-    return triangle_array[order], source[order]
-
-
 def _ply_face_materials(
     collected: Collected, columns: dict[str, np.ndarray], face_count: int
 ) -> tuple[np.ndarray, list[Material]]:
@@ -157,3 +132,50 @@ def _ply_face_materials(
         for name, v in zip(names, distinct.tolist(), strict=True)
     ]
     return inverse.reshape(-1), materials
+
+
+def read_ply_elements(path: Path) -> dict[str, Any]:
+    """The file's elements as ``{"vertex": {"data": ..., "length": n}, "face": {...}}``.
+
+    The header's ``format`` must be one of the three the PLY format defines, version 1.0
+    (trimesh would read any other as little endian). Binary files are read by trimesh,
+    which is fast; ASCII files, and binary ones trimesh fails on (mixed polygon sizes
+    before other face properties, say), by plyfile, which checks every record's length
+    (trimesh silently reads past a short line or a wrong element count).
+
+    Raises
+    ------
+    SceneError
+        ``cannot parse as PLY`` with the reason, naming the header line or the element
+        and row at fault.
+    """
+    binary = _check_format(path)
+    if binary:
+        try:
+            return trimesh_adapter.read_ply_elements(path)
+        except SceneError:
+            pass  # plyfile reads it, or says which record is at fault
+    import plyfile
+
+    try:
+        with path.open("rb") as f:
+            data = plyfile.PlyData.read(f)
+    except (plyfile.PlyParseError, ValueError, EOFError) as exc:
+        raise SceneError(path, f"cannot parse as PLY: {reason(exc)}") from None
+    return {e.name: {"data": e.data, "length": e.count} for e in data.elements}
+
+
+def _check_format(path: Path) -> bool:
+    """Whether the PLY file is binary; SceneError for a format line the spec lacks."""
+    with path.open("rb") as f:
+        head = f.read(_HEADER_LIMIT)
+    end = head.find(b"end_header")
+    header = head[: end if end >= 0 else len(head)].decode("ascii", errors="replace")
+    for number, line in enumerate(header.splitlines(), start=1):
+        words = line.split()
+        if words[:1] != ["format"]:
+            continue
+        if len(words) != 3 or words[1] not in _FORMATS or words[2] != "1.0":
+            raise SceneError(path, f"cannot parse as PLY: header line {number}: unknown {line!r}")
+        return words[1] != "ascii"
+    return False

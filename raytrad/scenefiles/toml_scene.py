@@ -36,9 +36,9 @@ from raytrad.scenefiles.common import Collected, Material, ReadOptions, compact
 
 log = logging.getLogger(__name__)
 
-#: ``load_mesh(path, uv_set)``: how a ``[[mesh]]`` file is loaded (the scene-file entrance,
-#: handed in so that this reader does not import it).
-LoadMesh = Callable[[Path, int | None], Scene]
+#: ``load_mesh(path, options)``: how a ``[[mesh]]`` file is loaded with the TOML file's
+#: read options (the scene-file entrance, handed in so that this reader does not import it).
+LoadMesh = Callable[[Path, ReadOptions], Scene]
 
 TOP_KEYS = ("mesh", "materials", "camera", "output")
 """Keys allowed at the top level of a scene file."""
@@ -119,7 +119,7 @@ def read_toml(path: Path, options: ReadOptions, load_mesh: LoadMesh) -> Collecte
         unknown keys, wrong types or ranges, missing or unloadable mesh files (naming both
         files), material names no mesh has.
     """
-    return _describe(_parse(path, options.uv_set, load_mesh), options)
+    return _describe(_parse(path, options, load_mesh), options)
 
 
 # --------------------------------------------------------------------------- materials
@@ -305,7 +305,7 @@ def _parse_transform(key: tv.Key, table: dict[str, Any]) -> np.ndarray:
 
 
 def _load_mesh(
-    key: tv.Key, table: dict[str, Any], uv_set: int | None, load_mesh: LoadMesh
+    key: tv.Key, table: dict[str, Any], options: ReadOptions, load_mesh: LoadMesh
 ) -> tuple[Path, Scene]:
     """The mesh file of a ``[[mesh]]`` table, loaded; errors name both files."""
     where = key / "file"
@@ -313,10 +313,18 @@ def _load_mesh(
     mesh_path = key.file.parent / name
     if mesh_path.suffix.lower() == ".toml":
         raise where.error(f"{name!r}: a scene file cannot include another TOML scene")
-    if not mesh_path.is_file():
+    folder = key.file.parent.resolve()
+    if not options.allow_outside and not mesh_path.resolve().is_relative_to(folder):
+        raise where.error(
+            f"mesh file {name!r} lies outside the scene folder {str(folder)!r} "
+            "(--allow-outside-files reads it)"
+        )
+    if not mesh_path.exists():
         raise where.error(f"mesh file {str(mesh_path)!r} not found")
+    if not mesh_path.is_file():
+        raise where.error(f"mesh file {str(mesh_path)!r} is not a regular file")
     try:
-        return mesh_path, load_mesh(mesh_path, uv_set)
+        return mesh_path, load_mesh(mesh_path, options)
     except SceneError as exc:
         raise where.error(f"cannot load mesh file: {exc}") from None
 
@@ -339,7 +347,7 @@ def _parse_mesh(
     key: tv.Key,
     value: Any,
     shared: dict[str, _Override],
-    uv_set: int | None,
+    options: ReadOptions,
     taken: set[str],
     load_mesh: LoadMesh,
 ) -> tuple[list[_Part], set[str]]:
@@ -352,7 +360,7 @@ def _parse_mesh(
     world_from_file = _parse_transform(key, table)
     overrides_key = key / "materials"
     overrides = _parse_materials(overrides_key, table.get("materials", {}))
-    mesh_path, mesh = _load_mesh(key, table, uv_set, load_mesh)
+    mesh_path, mesh = _load_mesh(key, table, options, load_mesh)
     object_names = _object_names(key, table, mesh_path, mesh, taken)
     names = set(mesh.material_names)
     for name in overrides:
@@ -490,11 +498,13 @@ def _read_toml(path: Path) -> dict[str, Any]:
         raise SceneError(path, f"cannot parse as TOML: {exc}") from None
     except UnicodeDecodeError as exc:
         raise SceneError(path, f"cannot parse as TOML: not UTF-8 text ({exc.reason})") from None
+    except RecursionError:
+        raise SceneError(path, "cannot parse as TOML: nesting too deep") from None
     except OSError as exc:
         raise SceneError(path, f"cannot read the file: {exc.strerror or exc}") from exc
 
 
-def _parse(path: Path, uv_set: int | None, load_mesh: LoadMesh) -> _Parsed:
+def _parse(path: Path, options: ReadOptions, load_mesh: LoadMesh) -> _Parsed:
     """Read and check a TOML scene file and load and place its meshes."""
     root = tv.Key(path)
     document = tv.table(root, _read_toml(path), TOP_KEYS)
@@ -508,7 +518,7 @@ def _parse(path: Path, uv_set: int | None, load_mesh: LoadMesh) -> _Parsed:
     taken: set[str] = set()
     for i, mesh in enumerate(meshes):
         mesh_parts, names = _parse_mesh(
-            (root / "mesh").index(i), mesh, shared, uv_set, taken, load_mesh
+            (root / "mesh").index(i), mesh, shared, options, taken, load_mesh
         )
         parts.extend(mesh_parts)
         found |= names

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import io
 import re
+import warnings
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -19,28 +20,34 @@ from raytrad.constants import tol
 from raytrad.errors import SceneError
 from raytrad.scenefiles.common import Collected, Material, reason, used_vertices
 
-#: ``rewrite(name, data)``: the bytes of a referenced file as the reader wants trimesh to
-#: see them; ``data`` is None when the file could not be read (return bytes to stand in,
-#: or raise OSError).
-Rewrite = Callable[[str, bytes | None], bytes]
 
+def bytes_resolver(files: dict[str, bytes]) -> Any:
+    """A trimesh resolver serving the given files by name, and refusing any other.
 
-def file_resolver(directory: Path, rewrite: Rewrite | None = None) -> Any:
-    """A trimesh resolver for files next to the scene, optionally rewriting what it reads."""
-    from trimesh.resolvers import FilePathResolver
+    The readers read every referenced file themselves (path checks, non-blocking opens,
+    :func:`~raytrad.scenefiles.common.read_reference`), so trimesh never opens a file.
+    """
+    from trimesh.resolvers import Resolver
 
-    class _Resolver(FilePathResolver):
-        def get(self, name: str) -> bytes:
-            if rewrite is None:
-                data: bytes = super().get(name)
-                return data
-            try:
-                found: bytes | None = super().get(name)
-            except OSError:
-                found = None
-            return rewrite(name, found)
+    class _Resolver(Resolver):
+        def __init__(self) -> None:
+            pass
 
-    return _Resolver(str(directory))
+        def get(self, key: str) -> bytes:
+            if key not in files:
+                raise OSError(f"{key}: not provided")
+            return files[key]
+
+        def write(self, name: str, data: Any) -> None:
+            raise OSError(f"{name}: read only")
+
+        def namespaced(self, namespace: str) -> Any:
+            return self
+
+        def keys(self) -> Any:
+            return files.keys()
+
+    return _Resolver()
 
 
 def parse_scene(path: Path, data: bytes, file_type: str, label: str, **options: Any) -> Any:
@@ -59,9 +66,13 @@ def parse_scene(path: Path, data: bytes, file_type: str, label: str, **options: 
     """
     import trimesh
 
-    options.setdefault("resolver", file_resolver(path.parent))
+    options.setdefault("resolver", bytes_resolver({}))
     try:
-        return trimesh.load_scene(io.BytesIO(data), file_type=file_type, process=False, **options)
+        with warnings.catch_warnings():  # trimesh's numpy warnings are noise to a user
+            warnings.simplefilter("ignore", RuntimeWarning)
+            return trimesh.load_scene(
+                io.BytesIO(data), file_type=file_type, process=False, **options
+            )
     except Exception as exc:  # trimesh raises many types for malformed input
         raise SceneError(path, f"cannot parse as {label}: {reason(exc)}") from exc
 
