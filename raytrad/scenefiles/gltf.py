@@ -2,8 +2,9 @@
 
 The JSON is parsed once. Cameras are read from it as they are (when asked for,
 :mod:`raytrad.scenefiles.gltf_cameras`); material values are read from it exactly, then
-each material is replaced by a name-only token and the document handed to trimesh for the
-geometry and the node tree, so trimesh never interprets (or rejects) a material value.
+each material is replaced by a name-only token; the geometry is decoded and checked by
+:mod:`raytrad.scenefiles.gltf_geometry`, and the rewritten document handed to trimesh for
+the node tree, so trimesh never interprets (or rejects) a material value or an accessor.
 
 reflectance = ``pbrMetallicRoughness.baseColorFactor[:3]`` [1]; emitted exitance =
 pi x ``emissiveFactor`` x ``KHR_materials_emissive_strength.emissiveStrength`` [W m-2]
@@ -23,7 +24,7 @@ from typing import Any
 import numpy as np
 
 from raytrad.errors import SceneError
-from raytrad.formats.glb import GLB_MAGIC, join_glb, split_glb
+from raytrad.formats.glb import GLB_MAGIC, split_glb
 from raytrad.scene import NamedCamera
 from raytrad.scenefiles import trimesh_adapter
 from raytrad.scenefiles.common import (
@@ -35,6 +36,12 @@ from raytrad.scenefiles.common import (
     rgb_of,
 )
 from raytrad.scenefiles.gltf_cameras import cameras_from_document
+from raytrad.scenefiles.gltf_geometry import (
+    GEOMETRY_BUFFER,
+    glb_bin_chunk,
+    load_buffers,
+    plain_geometry,
+)
 
 _MATERIAL_TOKEN = re.compile(r"^__raytrad_material_(\d+)__$")
 _DEFAULT_MATERIAL = Material("default", (1.0, 1.0, 1.0))
@@ -43,18 +50,24 @@ _DEFAULT_MATERIAL = Material("default", (1.0, 1.0, 1.0))
 def read_gltf(path: Path, options: ReadOptions) -> Collected:
     """A ``.gltf`` file (JSON, buffers beside it or as data URIs)."""
     document = parse_json(path, path.read_bytes(), "glTF")
-    collected, materials = _collect(path, options, document)
-    payload = json.dumps(document).encode("utf-8")
-    return _add_geometry(collected, payload, "gltf", materials, _node_names(document))
+    return _read(path, options, document, None)
 
 
 def read_glb(path: Path, options: ReadOptions) -> Collected:
-    """A binary ``.glb`` file: its JSON chunk is rewritten, the BIN chunk kept as is."""
+    """A binary ``.glb`` file: its JSON chunk and its ``BIN`` chunk."""
     json_bytes, rest = _split(path, path.read_bytes())
     document = parse_json(path, json_bytes, "GLB")
+    return _read(path, options, document, glb_bin_chunk(rest))
+
+
+def _read(path: Path, options: ReadOptions, document: Any, glb_bin: bytes | None) -> Collected:
+    """Materials and cameras read here, geometry decoded here
+    (:mod:`~raytrad.scenefiles.gltf_geometry`), the node tree through trimesh."""
     collected, materials = _collect(path, options, document)
-    payload = join_glb(json.dumps(document).encode("utf-8"), rest)
-    return _add_geometry(collected, payload, "glb", materials, _node_names(document))
+    buffers = load_buffers(path, document, glb_bin, options.allow_outside)
+    plain, data = plain_geometry(path, document, buffers, collected.warn_once)
+    payload = json.dumps(plain).encode("utf-8")
+    return _add_geometry(collected, payload, data, materials, _node_names(document))
 
 
 def read_gltf_cameras(path: str | os.PathLike[str], scale: float = 1.0) -> list[NamedCamera]:
@@ -214,14 +227,15 @@ def _node_names(document: dict[str, Any]) -> list[str]:
 def _add_geometry(
     collected: Collected,
     payload: bytes,
-    file_type: str,
+    data: bytes,
     materials: list[Material],
     node_order: list[str] | None = None,
 ) -> Collected:
-    """Parse the rewritten glTF/GLB bytes with trimesh and collect its triangles."""
+    """Parse the rewritten glTF (JSON ``payload``, buffer ``data``) with trimesh and collect
+    its triangles."""
     path = collected.path
-    label = "glTF" if file_type == "gltf" else "GLB"
-    tm_scene = trimesh_adapter.parse_scene(path, payload, file_type, label)
+    resolver = trimesh_adapter.bytes_resolver({GEOMETRY_BUFFER: data})
+    tm_scene = trimesh_adapter.parse_scene(path, payload, "gltf", "glTF", resolver=resolver)
 
     def material_of(geometry: Any) -> Material:
         token = trimesh_adapter.material_name(geometry)
