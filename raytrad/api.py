@@ -46,7 +46,7 @@ from raytrad.outputs.resume import checkpoint_path, fingerprint, resume_point, s
 from raytrad.outputs.write import check_output_range, write_outputs
 from raytrad.products.framing import file_camera
 from raytrad.products.lightmap import choose_lightmap_uvs
-from raytrad.scene import Scene, has_emission
+from raytrad.scene import Scene
 from raytrad.scenefiles import SceneFile, load_scene_file
 from raytrad.settings import RenderSettings, with_scene_defaults
 
@@ -248,8 +248,6 @@ def render(
     camera = None
     if settings.image is not None:
         camera = file_camera(loaded.cameras, settings.image.view, scene_path, loaded.kind)
-    if not has_emission(loaded.scene):
-        log.warning("%s: the scene has no emitter; every radiosity is zero", scene_path)
     key = fingerprint(loaded.scene, settings.system_settings())
     checkpoint = checkpoint_path(output_dir, scene_path.stem)
     state, columns = resume_point(checkpoint, key) if resume else (None, None)

@@ -33,6 +33,12 @@ from raytrad.products.display import TONEMAPS
 from raytrad.products.lightmap import LightmapSettings
 from raytrad.scene import Camera
 
+MAX_IMAGE_SIDE = 16384
+"""The widest or tallest image raytrad renders [pixels]."""
+
+MAX_IMAGE_SAMPLES = 4096
+"""The most samples per pixel of an image."""
+
 
 @dataclass(frozen=True)
 class ImageSettings:
@@ -70,6 +76,12 @@ class ImageSettings:
         small = [v for v in (self.width, self.height, self.samples) if v is not None and v < 1]
         if small:
             raise SettingsError("image width, height and samples must be at least 1")
+        sides = [v for v in (self.width, self.height) if v is not None]
+        if max(sides, default=0) > MAX_IMAGE_SIDE or self.samples > MAX_IMAGE_SAMPLES:
+            raise SettingsError(
+                f"image width and height must be at most {MAX_IMAGE_SIDE} pixels and samples "
+                f"at most {MAX_IMAGE_SAMPLES}"
+            )
         if self.tonemap not in TONEMAPS:
             raise SettingsError(
                 f"tone map must be one of {', '.join(TONEMAPS)}, not {self.tonemap!r}"
@@ -122,8 +134,10 @@ class RenderSettings:
     def __post_init__(self) -> None:
         if not (self.scale > 0 and math.isfinite(self.scale)):
             raise SettingsError(f"scale must be a positive number, got {self.scale}")
-        if self.cache_mb < 0:
-            raise SettingsError(f"cache must be >= 0 MiB, got {self.cache_mb}")
+        if not (self.cache_mb >= 0 and math.isfinite(self.cache_mb)):
+            raise SettingsError(f"cache must be a finite number >= 0 MiB, got {self.cache_mb}")
+        if self.exposure is not None and not math.isfinite(self.exposure):
+            raise SettingsError(f"exposure must be a finite number of stops, got {self.exposure}")
 
     def system_settings(self) -> dict[str, Any]:
         """The settings that define the discrete system (for checkpoint fingerprints)."""

@@ -97,6 +97,27 @@ BAD_INPUTS = {
         "newmtl m\nKd 0.5 0.5 0.5\nKe -1 0 0\n",
     ),
     "two-coordinates.obj": "v 0 0\nv 1 0\nv 0 1\nf 1 2 3\n",
+    "index-zero.obj": TRIANGLE + "f 0 1 2\n",
+    "relative-too-far.obj": TRIANGLE + "f -4 -2 -1\n",
+    "index-past-end.obj": TRIANGLE + "f 1 2 4\n",
+    "huge.obj": "v 1e300 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n",
+    "beyond-float32.obj": "v 1e39 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n",
+    "glow.obj": (
+        "mtllib glow.mtl\n" + TRIANGLE + "usemtl m\nf 1 2 3\n",
+        "newmtl m\nKd 0.5 0.5 0.5\nKe 1e200 1e200 1e200\n",
+    ),
+    # one stray vertex 5e8 m away: refining it would never end
+    "far-vertex.obj": TRIANGLE + "v 5e8 0 0.5\nf 1 2 3\nf 2 4 3\n",
+    "deep.toml": "a = " + "[" * 1200 + "]" * 1200 + "\n",
+    "deep.gltf": "[" * 1200 + "]" * 1200,
+    "short-line.ply": (
+        "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\n"
+        "property float z\nelement face 1\nproperty list uchar int vertex_indices\n"
+        "end_header\n0 0\n1 0 0\n0 1 0\n3 0 1 2\n"
+    ),
+    "middle-endian.ply": (
+        "ply\nformat binary_middle_endian 1.0\nelement vertex 0\nproperty float x\nend_header\n"
+    ),
 }
 
 
@@ -126,6 +147,16 @@ def test_bad_scene_is_one_line_and_writes_nothing(
 @pytest.mark.parametrize(
     ("option", "value", "word"),
     [
+        ("--exposure", "nan", "exposure"),
+        ("--exposure", "inf", "exposure"),
+        ("--cache-mb", "nan", "cache"),
+        ("--receivers", "1000000000000", "receivers"),
+        ("--max-receivers", "100000000000", "max receivers"),
+        ("--max-edge", "1e-9", "refining would make"),
+        ("--image --width", "10000000", "width"),
+        ("--image --width", "0", "width"),
+        ("--image --camera", "nan,1,1:0,0,0", "camera"),
+        ("--lightmap --lightmap-resolution", "0", "lightmap resolution"),
         ("--tolerance", "0", "tolerance"),
         ("--tolerance", "1.5", "tolerance"),
         ("--samples", "0", "samples"),
@@ -143,7 +174,7 @@ def test_bad_option_values_are_refused(
 ) -> None:
     out = tmp_path / "out"
     status, _, err = run_cli(
-        ["render", str(FURNACE_OBJ), "-o", str(out), option, value, "-q"], capsys
+        ["render", str(FURNACE_OBJ), "-o", str(out), *option.split(), value, "-q"], capsys
     )
     assert status != 0
     assert word in err.lower()

@@ -27,7 +27,7 @@ import numpy as np
 from raytrad.constants import tol
 from raytrad.core.formfactor import ROW_FIX_LIMIT, FormFactorEngine, receiver_points
 from raytrad.core.gather import gathered_irradiance
-from raytrad.core.mesh import RadiosityMesh, surface_receivers
+from raytrad.core.mesh import MAX_RECEIVERS, RadiosityMesh, surface_receivers
 from raytrad.core.refine import refine
 from raytrad.core.visibility import Occluder
 from raytrad.errors import SettingsError
@@ -72,8 +72,10 @@ class RefineSettings:
     def __post_init__(self) -> None:
         if not (self.threshold >= 0 and np.isfinite(self.threshold)):
             raise SettingsError(f"refine threshold must be >= 0, got {self.threshold}")
-        if self.max_receivers is not None and self.max_receivers < 1:
-            raise SettingsError(f"max receivers must be at least 1, got {self.max_receivers}")
+        if self.max_receivers is not None and not 1 <= self.max_receivers <= MAX_RECEIVERS:
+            raise SettingsError(
+                f"max receivers must be 1 to {MAX_RECEIVERS:,}, got {self.max_receivers}"
+            )
         if self.rounds < 0:
             raise SettingsError(f"refinement rounds must be >= 0, got {self.rounds}")
 

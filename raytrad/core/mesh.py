@@ -28,6 +28,7 @@ from raytrad.core.refine import (
     max_edge_for_receivers,
     merge_vertices,
     refine,
+    refined_count_bound,
     surface_labels,
 )
 from raytrad.errors import SceneError, SettingsError
@@ -37,6 +38,13 @@ log = logging.getLogger(__name__)
 
 #: Surfaces meeting at more than this dihedral angle are separate receivers [degrees].
 CREASE_ANGLE = 30.0
+
+MAX_RECEIVERS = 10_000_000
+"""The most receivers a mesh may ask for (``--receivers``, ``--max-receivers``)."""
+
+MAX_REFINED_TRIANGLES = 2e8
+"""The largest bound (:func:`~raytrad.core.refine.refined_count_bound`) on the triangles
+refinement may make; a scene whose extent would need more is refused before refining."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -163,6 +171,8 @@ class MeshSettings:
             raise SettingsError(f"max edge must be positive, got {self.max_edge}")
         if self.receivers < 1 or self.patches < 1 or self.samples < 1 or self.emitter_samples < 1:
             raise SettingsError("receivers, patches and samples must be at least 1")
+        if max(self.receivers, self.patches) > MAX_RECEIVERS:
+            raise SettingsError(f"receivers and patches must be at most {MAX_RECEIVERS:,}")
         if self.patch_size is not None and not self.patch_size > 0:
             raise SettingsError(f"patch size must be positive, got {self.patch_size}")
 
@@ -193,6 +203,7 @@ def build_mesh(
     patch_size = settings.patch_size or math.sqrt(total_area / settings.patches)
     emissive = (scene.material_emitted_exitance[material] > 0).any(axis=1)
     limit = _edge_limits(base_area, surface, emissive, max_edge, patch_size, settings)
+    _check_refinement_budget(scene, positions[triangles], limit)
     positions, fine, parent = refine(positions, triangles, limit)
     fine_surface = surface[parent]
     area, normal = triangle_areas_normals(positions[fine])
@@ -244,6 +255,23 @@ def build_mesh(
         settings.seed,
     )
     return replace(mesh, triangle_surface=fine_surface)
+
+
+def _check_refinement_budget(scene: Scene, corners: np.ndarray, limit: np.ndarray) -> None:
+    """Refuse, before refining, a scene that would need more than
+    :data:`MAX_REFINED_TRIANGLES` triangles (a stray vertex far away, wrong units, a
+    ``max_edge`` far below the scene's size)."""
+    bound = refined_count_bound(corners, limit)
+    if bound <= MAX_REFINED_TRIANGLES:
+        return
+    lengths = np.linalg.norm(corners - np.roll(corners, 1, axis=1), axis=2).max(axis=1)
+    worst = int(np.argmax(lengths / limit))
+    raise SceneError(
+        scene.source,
+        f"refining would make up to {bound:.2g} triangles (more than {MAX_REFINED_TRIANGLES:.0e}): "
+        f"a triangle {lengths[worst]:.3g} m long must be cut into edges of {limit[worst]:.3g} m; "
+        "check the units, stray vertices far from the rest, or --max-edge",
+    )
 
 
 def _edge_limits(

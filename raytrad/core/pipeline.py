@@ -36,7 +36,7 @@ from raytrad.core.repair import repair_scene
 from raytrad.core.solver import SolveResult, SolveSettings, check_solvable, filled_capture
 from raytrad.core.visibility import Occluder, nothing_can_occlude
 from raytrad.errors import SolverError
-from raytrad.scene import Scene, triangle_areas_normals
+from raytrad.scene import Scene, has_emission, triangle_areas_normals
 
 log = logging.getLogger(__name__)
 
@@ -137,6 +137,8 @@ def prepare(
     timings: dict[str, float] = {}
     with timed(timings, "mesh"):
         scene = repair_scene(scene)
+    if not has_emission(scene):  # after repair, which may have dropped the emitters
+        log.warning("%s: the scene has no emitter; every radiosity is zero", scene.source)
     with timed(timings, "acceleration"):
         extent = scene_extent(scene.positions[np.unique(scene.triangles)])
         occluder = None

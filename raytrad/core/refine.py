@@ -112,6 +112,31 @@ def refine(
     return positions, triangles, parent
 
 
+def refined_count_bound(corners: np.ndarray, max_edge: float | np.ndarray) -> float:
+    """An upper bound on the triangles :func:`refine` makes of these triangles.
+
+    Midpoint splitting halves every edge of a triangle each round at most, so a triangle
+    whose longest edge is ``L`` needs ``k = ceil(log2(L / max_edge))`` rounds and ends as at
+    most ``4**k`` triangles. For a sliver that is the count indeed (its pieces stay
+    slivers), far above what its area suggests: one stray vertex 5e8 m away makes a
+    triangle worth 1e11 of them.
+
+    Parameters
+    ----------
+    corners : (T, 3, 3) float [m]
+    max_edge : float or (T,) float [m]
+
+    Returns
+    -------
+    float
+        The sum of ``4**k`` over the triangles (inf when it overflows).
+    """
+    lengths = np.linalg.norm(corners - np.roll(corners, 1, axis=1), axis=2).max(axis=1)
+    with np.errstate(divide="ignore", over="ignore", invalid="ignore"):
+        rounds = np.ceil(np.log2(np.maximum(lengths / max_edge, 1.0)))
+        return float(np.sum(4.0**rounds))
+
+
 def longest_edge(lengths: np.ndarray) -> np.ndarray:
     """(T,) index of each row's largest entry, ties (to ``tol.tie`` relative) to the first.
 

@@ -6,7 +6,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from raytrad.constants import defaults, tol
+from raytrad.constants import FLOAT32_MAX, defaults, tol
 from raytrad.errors import SettingsError
 
 
@@ -28,6 +28,11 @@ class Camera:
     vertical_fov_deg: float = defaults.vertical_fov_deg
 
     def __post_init__(self) -> None:
+        points = np.array([self.position, self.look_at, self.up], dtype=np.float64)
+        if not (np.isfinite(points).all() and np.abs(points).max() <= FLOAT32_MAX):
+            raise SettingsError(
+                "camera position, look_at and up must be finite numbers within float32 range"
+            )
         forward = np.subtract(self.look_at, self.position)
         length = float(np.linalg.norm(forward))
         # rounding far from the origin: look_at must differ from position by more than

@@ -4,13 +4,17 @@ budget cuts the pass short)."""
 
 from __future__ import annotations
 
+import dataclasses
+import logging
 import time
 
 import numpy as np
+import pytest
 
 from raytrad.core.mesh import MeshSettings
 from raytrad.core.pipeline import RunBudget, prepare
 from raytrad.core.solver import SolveSettings, solve
+from raytrad.scene import has_emission
 from raytrad.scene.builtin import cornell_box, furnace_box
 from tests.conftest import FURNACE_MESH
 
@@ -38,6 +42,23 @@ def test_the_prepared_scene_is_the_repaired_one() -> None:
     doubled = scene.select(np.concatenate([np.arange(scene.triangle_count)] * 2))
     with prepare(doubled, FURNACE_MESH) as prepared:  # every face twice: one copy kept
         assert prepared.scene.triangle_count == scene.triangle_count
+
+
+def test_no_emitter_warning_comes_after_repair(caplog: pytest.LogCaptureFixture) -> None:
+    # the lamp's triangles, first written again as white: repair keeps the first copy of
+    # a duplicate, so the lamp goes and the scene emits nothing
+    scene = cornell_box()
+    lamp = np.flatnonzero(scene.emitted_exitance.any(axis=1))
+    white = scene.material_names.index("white")
+    rows = np.concatenate([lamp, np.arange(scene.triangle_count)])
+    doubled = scene.select(rows)
+    material = doubled.material_index.copy()
+    material[: len(lamp)] = white
+    doubled = dataclasses.replace(doubled, material_index=material)
+    assert has_emission(doubled)
+    with caplog.at_level(logging.WARNING), prepare(doubled, MeshSettings(receivers=300)) as done:
+        assert not has_emission(done.scene)
+    assert "the scene has no emitter" in caplog.text
 
 
 def test_a_new_engine_has_the_same_balanced_factors() -> None:
