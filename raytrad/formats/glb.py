@@ -160,12 +160,19 @@ class GltfDocument:
         material : int
             Index into :attr:`materials`.
         attributes : (V, k) float
-            Stored as float32 ``VEC2``/``VEC3`` accessors, in the order given.
+            Stored as float32 ``VEC2``/``VEC3`` accessors, in the order given. glTF wants
+            the ``TEXCOORD_<n>`` sets to start at 0 and run without a gap (validator:
+            ``MESH_PRIMITIVE_INDEXED_SEMANTIC_CONTINUITY``), so a missing lower set shares
+            the accessor of the lowest set given (``TEXCOORD_1`` alone also gives
+            ``TEXCOORD_0``).
         """
         accessors = {"POSITION": self.buffers.add(np.asarray(positions, dtype="<f4"), "VEC3")}
         for name, values in attributes.items():
             values = np.asarray(values, dtype="<f4")
             accessors[name] = self.buffers.add(values, f"VEC{values.shape[1]}")
+        sets = sorted(int(name[9:]) for name in accessors if name.startswith("TEXCOORD_"))
+        for k in range(sets[-1] if sets else 0):
+            accessors.setdefault(f"TEXCOORD_{k}", accessors[f"TEXCOORD_{sets[0]}"])
         indices = np.asarray(triangles, dtype="<u4").reshape(-1)
         return {
             "attributes": accessors,

@@ -91,6 +91,18 @@ def test_trimesh_reads_the_same_mesh(tmp_path: Path, mesh: dict[str, np.ndarray]
     np.testing.assert_array_equal(raw["radiosity_g"], mesh["radiosity"][:, 1].astype(np.float32))
 
 
+def test_plyfile_reads_the_same_mesh(tmp_path: Path, mesh: dict[str, np.ndarray]) -> None:
+    plyfile = pytest.importorskip("plyfile")
+    path = tmp_path / "c.ply"
+    write_radiosity_ply(path, **mesh)
+    loaded = plyfile.PlyData.read(str(path))
+    vertex = loaded["vertex"].data
+    np.testing.assert_array_equal(vertex["x"], mesh["positions"][:, 0].astype(np.float32))
+    np.testing.assert_array_equal(vertex["radiosity_b"], mesh["radiosity"][:, 2].astype(np.float32))
+    faces = np.stack(loaded["face"].data["vertex_indices"])
+    np.testing.assert_array_equal(faces, mesh["triangles"])
+
+
 def test_missing_radiosity_properties_name_the_file(tmp_path: Path) -> None:
     path = tmp_path / "plain.ply"
     header = (
