@@ -144,6 +144,13 @@ def build_parser() -> argparse.ArgumentParser:
         "automatic framing",
     )
     outputs.add_argument(
+        "--up",
+        choices=("y", "z"),
+        default="y",
+        help="the scene's up axis, for the automatic camera and --camera: y (glTF, most "
+        "engines) or z (CAD, Blender without axis conversion) (default: %(default)s)",
+    )
+    outputs.add_argument(
         "--tonemap",
         choices=("srgb", "aces"),
         default="srgb",
@@ -405,7 +412,7 @@ class _StopFlag:
         )
 
 
-def _parse_camera(text: str) -> Camera:
+def _parse_camera(text: str, up: str = "y") -> Camera:
     try:
         parts = text.split(":")
         position = tuple(float(v) for v in parts[0].split(","))
@@ -420,6 +427,7 @@ def _parse_camera(text: str) -> Camera:
     return Camera(
         (position[0], position[1], position[2]),
         (target[0], target[1], target[2]),
+        up=(0.0, 0.0, 1.0) if up == "z" else (0.0, 1.0, 0.0),
         vertical_fov_deg=fov,
     )
 
@@ -458,9 +466,10 @@ def _output_settings(args: argparse.Namespace) -> dict[str, Any]:
             width=args.width,
             height=args.height,
             samples=args.spp,
-            camera=None if args.camera is None else _parse_camera(args.camera),
+            camera=None if args.camera is None else _parse_camera(args.camera, args.up),
             view=args.view,
             tonemap=args.tonemap,
+            up=args.up,
         )
     return out
 

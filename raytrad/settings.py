@@ -63,6 +63,9 @@ class ImageSettings:
     tonemap : str
         Display encoding of the PNG: ``"srgb"`` (clip, sRGB) or ``"aces"`` (filmic ACES
         output transform; see :func:`raytrad.products.display.display_encode`).
+    up : str
+        The scene's up axis for automatic framing: ``"y"`` (glTF's convention) or ``"z"``
+        (CAD, Blender without axis conversion).
     """
 
     width: int | None = None
@@ -71,6 +74,7 @@ class ImageSettings:
     camera: Camera | None = None
     view: str | None = None
     tonemap: str = "srgb"
+    up: str = "y"
 
     def __post_init__(self) -> None:
         small = [v for v in (self.width, self.height, self.samples) if v is not None and v < 1]
@@ -82,6 +86,8 @@ class ImageSettings:
                 f"image width and height must be at most {MAX_IMAGE_SIDE} pixels and samples "
                 f"at most {MAX_IMAGE_SAMPLES}"
             )
+        if self.up not in ("y", "z"):
+            raise SettingsError(f"up axis must be y or z, not {self.up!r}")
         if self.tonemap not in TONEMAPS:
             raise SettingsError(
                 f"tone map must be one of {', '.join(TONEMAPS)}, not {self.tonemap!r}"

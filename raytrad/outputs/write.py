@@ -20,7 +20,7 @@ from raytrad.outputs.gltf import baked_parts, write_baked_glb
 from raytrad.outputs.lightmaps import write_lightmaps
 from raytrad.products.display import auto_exposure, display_colors, display_encode, fill_hidden
 from raytrad.products.framing import image_view
-from raytrad.products.image import render_radiance
+from raytrad.products.image import render_radiance, seen_receivers
 from raytrad.products.lightmap import Lightmap, bake_lightmaps
 from raytrad.scene import NamedCamera
 from raytrad.settings import ImageSettings, RenderSettings
@@ -75,8 +75,9 @@ def write_outputs(
         lightmaps = bake_lightmaps(prepared.scene, mesh, shown, settings.lightmap)
         previews = write_lightmaps(lightmaps, output_dir, stem, metadata, exposure, outputs, facts)
     if settings.image is not None:
+        exposures = (emitting, stops)
         facts["camera"] = _write_image(
-            prepared, shown, settings.image, camera, exposure, metadata, output_dir / stem, outputs
+            prepared, shown, settings.image, camera, exposures, metadata, output_dir / stem, outputs
         )
     if settings.gltf:
         outputs["gltf"] = output_dir / f"{stem}.glb"
@@ -91,15 +92,22 @@ def _write_image(
     radiosity: np.ndarray,
     image: ImageSettings,
     camera: NamedCamera | None,
-    exposure: float,
+    exposures: tuple[np.ndarray, float],
     metadata: dict[str, str],
     base: Path,
     outputs: dict[str, Path],
 ) -> dict[str, Any]:
-    """Render and write ``<base>.exr`` (linear radiance) and ``<base>.png``; the camera."""
+    """Render and write ``<base>.exr`` (linear radiance) and ``<base>.png``; the camera
+    and the PNG's exposure, set by what the camera sees (:func:`auto_exposure` over the
+    receivers in view, weighted by how much of the frame they fill) plus ``--exposure``
+    stops; ``exposures`` is (emitting receivers, stops)."""
     height = image.height or defaults.image_height
-    view, width, origin = image_view(prepared.mesh, image.camera, camera, image.width, height)
+    view, width, origin = image_view(
+        prepared.mesh, image.camera, camera, image.width, height, radiosity, image.up
+    )
     radiance = render_radiance(prepared.mesh, radiosity, view, width, height, image.samples)
+    emitting, stops = exposures
+    exposure = auto_exposure(radiosity, emitting, seen_receivers(prepared.mesh, view)) * 2.0**stops
     outputs["image"] = base.with_name(base.name + ".exr")
     outputs["image_preview"] = base.with_name(base.name + ".png")
     write_exr(
@@ -113,7 +121,7 @@ def _write_image(
         },
     )
     write_png(outputs["image_preview"], display_encode(radiance * exposure, image.tonemap))
-    return {**dataclasses.asdict(view), "name": origin}
+    return {**dataclasses.asdict(view), "name": origin, "exposure": exposure}
 
 
 def check_output_range(radiosity: np.ndarray, scene_path: Path) -> None:

@@ -45,6 +45,30 @@ def primary_directions(
     return np.asarray(direction / np.linalg.norm(direction, axis=1)[:, None])
 
 
+def seen_receivers(
+    mesh: RadiosityMesh, camera: Camera, width: int = 64, height: int = 48
+) -> np.ndarray:
+    """(R,) how much of a small image from ``camera`` each receiver fills [pixels].
+
+    Each pixel's primary ray is split over the corners of the triangle it hits by their
+    barycentric weights, so the weights say what the camera sees (for the image's own
+    exposure); a receiver out of view gets 0.
+    """
+    occluder = Occluder(mesh.positions, mesh.triangles)
+    try:
+        origin = occluder.to_local(np.asarray(camera.position, dtype=np.float64)[None, :])
+        direction = primary_directions(camera, width, height, 0.5, 0.5)
+        hit, _, weights = occluder.intersect_barycentric_local(
+            np.broadcast_to(origin, direction.shape), direction
+        )
+    finally:
+        occluder.close()
+    seen = hit >= 0
+    counts = np.zeros(len(mesh.receiver_position))
+    np.add.at(counts, mesh.triangle_receivers[hit[seen]].ravel(), weights[seen].ravel())
+    return counts
+
+
 def render_radiance(
     mesh: RadiosityMesh,
     radiosity: np.ndarray,
