@@ -91,7 +91,7 @@ def test_the_image_exposure_comes_from_what_the_camera_sees(tmp_path: Path) -> N
 
 
 def _rotated(camera: Camera, rotation: np.ndarray) -> tuple[np.ndarray, ...]:
-    right, up, forward = camera.basis()
+    _, up, forward = camera.basis()
     position = np.asarray(camera.position) @ rotation.T
     return position, up @ rotation.T, forward @ rotation.T
 
