@@ -198,6 +198,14 @@ def build_mesh(
     positions, triangles, material = _surface_triangles(scene)
     base_area, _ = triangle_areas_normals(positions[triangles])
     total_area = float(base_area.sum())
+    if not (total_area > 0.0 and math.isfinite(total_area)):
+        extent = scene_extent(scene.positions[np.unique(scene.triangles)])
+        raise SceneError(
+            scene.source,
+            f"no surface is left once vertices closer than {extent * tol.merge:.3g} m are "
+            f"merged (the scene is {extent:.3g} m across): check the units, or stray "
+            "vertices far from the rest",
+        )
     max_edge = settings.max_edge or max_edge_for_receivers(total_area, settings.receivers)
     surface = surface_labels(positions, triangles, material, CREASE_ANGLE)
     patch_size = settings.patch_size or math.sqrt(total_area / settings.patches)

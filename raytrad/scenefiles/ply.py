@@ -8,6 +8,7 @@ The radiosity PLY raytrad writes is :mod:`raytrad.formats.ply`.
 
 from __future__ import annotations
 
+import warnings
 from pathlib import Path
 from typing import Any
 
@@ -28,6 +29,12 @@ from raytrad.scenefiles.polygons import triangulate_polygons
 
 _FORMATS = ("ascii", "binary_little_endian", "binary_big_endian")
 _HEADER_LIMIT = 1 << 20
+_TYPE_SIZES = {
+    **dict.fromkeys(("char", "uchar", "int8", "uint8"), 1),
+    **dict.fromkeys(("short", "ushort", "int16", "uint16"), 2),
+    **dict.fromkeys(("int", "uint", "float", "int32", "uint32", "float32"), 4),
+    **dict.fromkeys(("double", "float64"), 8),
+}
 
 _REFLECTANCE_PROPERTIES = ("reflectance_r", "reflectance_g", "reflectance_b")
 _EMISSION_PROPERTIES = ("emitted_exitance_r", "emitted_exitance_g", "emitted_exitance_b")
@@ -149,7 +156,7 @@ def read_ply_elements(path: Path) -> dict[str, Any]:
         ``cannot parse as PLY`` with the reason, naming the header line or the element
         and row at fault.
     """
-    binary = _check_format(path)
+    binary = _check_header(path)
     if binary:
         try:
             return trimesh_adapter.read_ply_elements(path)
@@ -158,24 +165,46 @@ def read_ply_elements(path: Path) -> dict[str, Any]:
     import plyfile
 
     try:
-        with path.open("rb") as f:
+        with path.open("rb") as f, warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # numpy's loadtxt notes are noise to a user
             data = plyfile.PlyData.read(f)
-    except (plyfile.PlyParseError, ValueError, EOFError) as exc:
+    except Exception as exc:  # plyfile raises several types for malformed input
         raise SceneError(path, f"cannot parse as PLY: {reason(exc)}") from None
     return {e.name: {"data": e.data, "length": e.count} for e in data.elements}
 
 
-def _check_format(path: Path) -> bool:
-    """Whether the PLY file is binary; SceneError for a format line the spec lacks."""
+def _check_header(path: Path) -> bool:
+    """Whether the PLY file is binary; SceneError for a ``format`` line the spec lacks, or
+    element counts the file is too short to hold (a flipped byte can make a count of 4e9,
+    which a reader would try to allocate)."""
     with path.open("rb") as f:
         head = f.read(_HEADER_LIMIT)
     end = head.find(b"end_header")
     header = head[: end if end >= 0 else len(head)].decode("ascii", errors="replace")
+    binary = False
+    elements: list[tuple[str, int, int, int]] = []  # name, count, properties, least bytes
     for number, line in enumerate(header.splitlines(), start=1):
         words = line.split()
-        if words[:1] != ["format"]:
-            continue
-        if len(words) != 3 or words[1] not in _FORMATS or words[2] != "1.0":
-            raise SceneError(path, f"cannot parse as PLY: header line {number}: unknown {line!r}")
-        return words[1] != "ascii"
-    return False
+        if words[:1] == ["format"]:
+            if len(words) != 3 or words[1] not in _FORMATS or words[2] != "1.0":
+                raise SceneError(
+                    path, f"cannot parse as PLY: header line {number}: unknown {line!r}"
+                )
+            binary = words[1] != "ascii"
+        elif words[:1] == ["element"] and len(words) == 3 and words[2].isdigit():
+            elements.append((words[1], int(words[2]), 0, 0))
+        elif words[:1] == ["property"] and elements and len(words) >= 3:
+            size = _TYPE_SIZES.get(words[2] if words[1] == "list" else words[1], 1)
+            name, count, properties, least = elements[-1]
+            elements[-1] = (name, count, properties + 1, least + size)
+    if end >= 0:
+        body = path.stat().st_size - (end + len(b"end_header") + 1)
+        for name, count, properties, least in elements:
+            need = count * (least if binary else 2 * properties)
+            if need > body:
+                raise SceneError(
+                    path,
+                    f"cannot parse as PLY: the header declares {count} {name} elements, "
+                    f"more than the file's {max(body, 0)} bytes of data can hold",
+                )
+    return binary
