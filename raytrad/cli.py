@@ -618,6 +618,22 @@ def main(argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("raytrad: aborted", file=sys.stderr)
         return 130
+    except MemoryError:
+        print(
+            f"raytrad: error: {args.scene}: out of memory (lower --receivers or --cache-mb)",
+            file=sys.stderr,
+        )
+        return 1
+    except Exception as exc:  # a fault of raytrad's own: one line, the traceback with -v
+        if args.verbose:
+            raise
+        print(
+            f"raytrad: error: {args.scene}: internal error ({type(exc).__name__}: "
+            f"{' '.join(str(exc).split())[:200]}); rerun with -v for the traceback and "
+            "please report it",
+            file=sys.stderr,
+        )
+        return 1
     parser.error(f"unknown command {args.command}")
     return 2
 

@@ -327,3 +327,27 @@ def test_time_limit_bounds_the_form_factor_pass(
     assert {p.name for p in out.iterdir()} >= {"cornell-box.ply", "cornell-box.checkpoint.npz"}
     _, _, radiosity = read_radiosity_ply(out / "cornell-box.ply")
     assert np.isfinite(radiosity).all() and (radiosity > 0).mean() > 0.5  # lit, not just E
+
+
+@pytest.mark.parametrize("fault", [RuntimeError("boom\nsecond line"), MemoryError()])
+def test_an_internal_fault_is_one_line_and_a_traceback_with_v(
+    tmp_path: Path,
+    capsys: pytest.CaptureFixture[str],
+    monkeypatch: pytest.MonkeyPatch,
+    fault: BaseException,
+) -> None:
+    def broken(*args: object, **kwargs: object) -> None:
+        raise fault
+
+    monkeypatch.setattr(api, "render", broken)
+    argv = ["render", str(FURNACE_OBJ), "-o", str(tmp_path / "out"), "-q"]
+    status, _, err = run_cli(argv, capsys)
+    assert status == 1
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith(f"raytrad: error: {FURNACE_OBJ}: ")
+    if isinstance(fault, RuntimeError):
+        assert "internal error (RuntimeError: boom second line)" in lines[0]
+        with pytest.raises(RuntimeError):
+            run_cli([*argv[:-1], "-v"], capsys)
+    else:
+        assert "out of memory" in lines[0]
