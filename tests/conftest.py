@@ -36,6 +36,27 @@ CORNELL_OBJECTS = (
 )
 
 
+def npm_package(directory: Path, package: str) -> None:
+    """Make sure the npm ``package`` pinned in ``directory``'s package.json is installed
+    there (``npm install``), or skip the test saying why it cannot be."""
+    import shutil
+    import subprocess
+
+    if (directory / "node_modules" / package).is_dir():
+        return
+    npm = shutil.which("npm")
+    if npm is None:
+        pytest.skip(f"npm is needed to install {package} (not installed)")
+    done = subprocess.run(
+        [npm, "install", "--no-audit", "--no-fund", "--prefix", str(directory)],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    if done.returncode != 0:
+        pytest.skip(f"could not install {package} from npm: {done.stderr[-300:]}")
+
+
 def run_cli(argv: list[str], capsys: pytest.CaptureFixture[str]) -> tuple[int, str, str]:
     """``raytrad.cli.main(argv)`` in-process: (exit status, stdout, stderr)."""
     from raytrad.cli import main

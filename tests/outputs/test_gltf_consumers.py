@@ -28,7 +28,7 @@ from raytrad import api
 from raytrad.core.mesh import MeshSettings
 from raytrad.formats.images import read_image
 from raytrad.settings import ImageSettings, LightmapSettings, RenderSettings
-from tests.conftest import REPOSITORY, SCENES
+from tests.conftest import REPOSITORY, SCENES, npm_package
 
 WIDTH, HEIGHT = 160, 120
 VIEWER = REPOSITORY / "tools" / "gltf_viewer"
@@ -107,18 +107,9 @@ def _chromium() -> str | None:
 @pytest.fixture(scope="module")
 def served(baked: tuple[Path, dict[str, object]]) -> Iterator[str]:
     """The viewer page, three.js and the baked glb over http on localhost; the base URL."""
-    npm = shutil.which("npm")
-    if _chromium() is None or npm is None:
-        pytest.skip("Chromium and npm are needed for the web viewer test (not installed)")
-    if not (VIEWER / "node_modules" / "three").is_dir():
-        done = subprocess.run(
-            [npm, "install", "--no-audit", "--no-fund", "--prefix", str(VIEWER)],
-            capture_output=True,
-            text=True,
-            timeout=300,
-        )
-        if done.returncode != 0:
-            pytest.skip(f"could not install three.js from npm: {done.stderr[-300:]}")
+    if _chromium() is None:
+        pytest.skip("Chromium is needed for the web viewer test (not installed)")
+    npm_package(VIEWER, "three")
     out, _ = baked
     site = out / "site"
     site.mkdir(exist_ok=True)
