@@ -354,6 +354,8 @@ def compare(
             f"unknown method(s) {', '.join(unknown) or '(none)'}; "
             f"choose from {', '.join(SHOOTING_METHODS)}"
         )
+    for method in methods:
+        settings.check_method(method)
     scene_path, output_dir = Path(scene_path), Path(output_dir)
     prepared = prepare(load(scene_path, settings).scene, settings)
     runs: list[MethodRun] = []

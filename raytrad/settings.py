@@ -27,6 +27,7 @@ from typing import Any
 from raytrad.constants import defaults
 from raytrad.core.adaptive import RefineSettings
 from raytrad.core.mesh import MeshSettings
+from raytrad.core.patch_factors import check_patch_factor_memory
 from raytrad.core.solver import SHOOTING_METHODS, SolveSettings
 from raytrad.errors import SettingsError
 from raytrad.products.display import TONEMAPS
@@ -144,6 +145,13 @@ class RenderSettings:
             raise SettingsError(f"cache must be a finite number >= 0 MiB, got {self.cache_mb}")
         if self.exposure is not None and not math.isfinite(self.exposure):
             raise SettingsError(f"exposure must be a finite number of stops, got {self.exposure}")
+        self.check_method(self.solve.method)
+
+    def check_method(self, method: str) -> None:
+        """Refuse, before any work, a method whose patch-to-patch factors would not fit
+        at the asked-for patch count (:mod:`raytrad.core.patch_factors`)."""
+        if method in SHOOTING_METHODS and SHOOTING_METHODS[method].patch_factors:
+            check_patch_factor_memory(self.mesh.patches, method)
 
     def system_settings(self) -> dict[str, Any]:
         """The settings that define the discrete system (for checkpoint fingerprints)."""

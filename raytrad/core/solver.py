@@ -24,6 +24,10 @@ The methods (``../shared/papers/feda-overshooting.txt``)
   assumption by the fraction of each shot that receivers actually caught (measured from the
   form factors, so open scenes and form-factor error do not inflate it), and halves the
   overshoot whenever the unshot power grows (see :class:`AmbientState`).
+* ``positive``, ``super_shoot_gather``, ``enhanced_super_shoot_gather``: formulas 6, 8
+  and 9, gathering over patch-to-patch factors built from the traced columns
+  (:mod:`raytrad.core.patch_factors`); the last chooses its shooter by
+  ``|dB + rho Ambient|`` and is capped at the total unshot power like formula 5.
 
 All methods shoot per RGB channel with float64 accumulation, choose the shooter by the
 magnitude actually shot summed over channels, shoot negative unshot radiosity too, and
@@ -33,17 +37,19 @@ stop on the remaining unshot power relative to the emitted power.
 from __future__ import annotations
 
 import logging
-import math
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
-from raytrad.core import compiled
+from raytrad.core import compiled, patch_factors
 from raytrad.core.columns import Column
 from raytrad.core.formfactor import FormFactorEngine
 from raytrad.core.mesh import RadiosityMesh
+from raytrad.core.patch_factors import PatchFactors
+from raytrad.core.solver_state import SolverState
 from raytrad.core.system import DiscreteSystem
 from raytrad.errors import SettingsError, SolverError
 
@@ -90,108 +96,6 @@ class SolveSettings:
             raise SettingsError(f"omega must lie in [1, 2), got {self.omega}")
 
 
-@dataclass
-class SolverState:
-    """Everything a solve accumulates; enough to resume it.
-
-    Attributes
-    ----------
-    irradiance : (R, 3) float64
-        Irradiance received by each receiver from all shots so far [W m-2].
-    patch_radiosity : (P, 3) float64
-        ``W B`` kept incrementally [W m-2].
-    shot : (P, 3) float64
-        Radiosity shot so far by each patch [W m-2].
-    captured : (P,) float64
-        Measured fraction of a shot from each patch caught by receivers, NaN until shot.
-    shots, rays : int
-        Shots taken and visibility rays cast.
-    absorbed, escaped : (3,) float64
-        Power absorbed by receivers and lost to the outside so far [W].
-    ambient_gain : float
-        Damping of the ambient overshoot (1 = formula 4 as published).
-    damping_events : int
-        Times growth of the unshot power (the sign of divergence) halved the overshoot.
-    entry_shot : (N, 3) float64
-        Radiosity shot so far by each (patch, receiver) entry of ``W`` (a receiver on a
-        patch border belongs to each of its patches) [W m-2]; ``shot = W entry_shot``.
-        Near receivers gather what a patch shoots as it varies across its receivers
-        (:mod:`raytrad.core.gather`), so the shots are kept per entry.
-    spread : (P, 3) float64
-        ``sum_k W_pk |dB_pk - dB_p|``: how far the unshot radiosity of the patch's
-        entries spreads about their mean [W m-2]. Shooting the mean leaves it to the near
-        receivers; it counts as unshot (:attr:`unshot_magnitude`). Derived from the other
-        arrays (not checkpointed).
-    peak : (P, 3) float64
-        ``max_k |dB_pk|``, the largest unshot radiosity of the patch's entries: what a
-        near receiver may see of it [W m-2]. Derived like ``spread``.
-    """
-
-    irradiance: np.ndarray
-    patch_radiosity: np.ndarray
-    shot: np.ndarray
-    captured: np.ndarray
-    shots: int = 0
-    rays: int = 0
-    seconds: float = 0.0
-    absorbed: np.ndarray = field(default_factory=lambda: np.zeros(3))
-    escaped: np.ndarray = field(default_factory=lambda: np.zeros(3))
-    ambient_gain: float = 1.0
-    min_unshot: float = math.inf
-    damping_events: int = 0
-    entry_shot: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
-    spread: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
-    peak: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
-
-    @property
-    def unshot(self) -> np.ndarray:
-        """(P, 3) float64 unshot radiosity of each patch [W m-2]."""
-        return np.asarray(self.patch_radiosity - self.shot)
-
-    @property
-    def unshot_peak(self) -> np.ndarray:
-        """(P, 3) float64 ``max_k |dB_pk|`` (at least ``|unshot|``) [W m-2]."""
-        peak = self.peak if self.peak.shape == self.shot.shape else 0.0
-        return np.asarray(np.maximum(np.abs(self.unshot), peak))
-
-    @property
-    def unshot_magnitude(self) -> np.ndarray:
-        """(P, 3) float64 ``|unshot| + spread``: at least ``sum_k W_pk |dB_pk|``, what is
-        still to shoot whoever sees it [W m-2]."""
-        spread = self.spread if self.spread.shape == self.shot.shape else 0.0
-        return np.asarray(np.abs(self.unshot) + spread)
-
-    #: The arrays and the scalars that make up a state (what a checkpoint stores).
-    ARRAYS = (
-        "irradiance",
-        "patch_radiosity",
-        "shot",
-        "captured",
-        "absorbed",
-        "escaped",
-        "entry_shot",
-    )
-    SCALARS = ("shots", "rays", "seconds", "ambient_gain", "min_unshot", "damping_events")
-
-    def to_record(self) -> tuple[dict[str, np.ndarray], dict[str, float]]:
-        """The state as named arrays and plain scalars, for a checkpoint."""
-        arrays = {name: np.asarray(getattr(self, name)) for name in self.ARRAYS}
-        return arrays, {name: float(getattr(self, name)) for name in self.SCALARS}
-
-    @classmethod
-    def from_record(cls, arrays: dict[str, np.ndarray], scalars: dict[str, float]) -> SolverState:
-        """The state :meth:`to_record` gave (KeyError when something is missing)."""
-        return cls(
-            **{name: np.array(arrays[name]) for name in cls.ARRAYS},
-            shots=int(scalars["shots"]),
-            rays=int(scalars["rays"]),
-            seconds=float(scalars["seconds"]),
-            ambient_gain=float(scalars["ambient_gain"]),
-            min_unshot=float(scalars["min_unshot"]),
-            damping_events=int(scalars.get("damping_events", 0)),
-        )
-
-
 @dataclass(frozen=True)
 class SolveResult:
     """What a solve produced.
@@ -223,18 +127,20 @@ class SolveResult:
 # Shooting amounts: one function per method (the registry)
 # --------------------------------------------------------------------------------------
 
-ShootAmount = Callable[["DiscreteSystem", SolverState, SolveSettings], np.ndarray]
+ShootAmount = Callable[
+    ["DiscreteSystem", SolverState, SolveSettings, "PatchFactors | None"], np.ndarray
+]
 
 
 def _progressive_amount(
-    problem: DiscreteSystem, state: SolverState, settings: SolveSettings
+    problem: DiscreteSystem, state: SolverState, settings: SolveSettings, factors: Any
 ) -> np.ndarray:
     """plain progressive refinement (Cohen et al. 1988)"""
     return state.unshot
 
 
 def _overrelaxation_amount(
-    problem: DiscreteSystem, state: SolverState, settings: SolveSettings
+    problem: DiscreteSystem, state: SolverState, settings: SolveSettings, factors: Any
 ) -> np.ndarray:
     """progressive refinement shooting omega times the unshot radiosity"""
     return settings.omega * state.unshot
@@ -250,8 +156,18 @@ def filled_capture(captured: np.ndarray, patch_area: np.ndarray) -> np.ndarray:
     return np.where(known, captured, mean_capture)
 
 
+def ambient_light(problem: DiscreteSystem, state: SolverState) -> np.ndarray:
+    """(3,) the ambient term of formula 3 [W m-2], with the measured capture fraction in
+    the amplification, never negative, times the damping gain."""
+    area = problem.patch_area
+    capture = filled_capture(state.captured, area)
+    lost = area @ (1.0 - problem.patch_reflectance * capture[:, None])  # (3,)
+    ambient = (area @ state.unshot) / np.maximum(lost, 1e-300 * area.sum())  # formula 3
+    return np.asarray(np.maximum(ambient, 0.0) * state.ambient_gain)
+
+
 def _ambient_amount(
-    problem: DiscreteSystem, state: SolverState, settings: SolveSettings
+    problem: DiscreteSystem, state: SolverState, settings: SolveSettings, factors: Any
 ) -> np.ndarray:
     """ambient overshooting (Feda 1992), the default and usually fastest
 
@@ -259,14 +175,38 @@ def _ambient_amount(
     """
     unshot = state.unshot
     area = problem.patch_area
-    unshot_power = area @ unshot  # (3,)
-    capture = filled_capture(state.captured, area)
-    lost = area @ (1.0 - problem.patch_reflectance * capture[:, None])  # (3,)
-    ambient = unshot_power / np.maximum(lost, 1e-300 * area.sum())  # formula 3
-    ambient = np.maximum(ambient, 0.0) * state.ambient_gain
-    amount = unshot + problem.patch_reflectance * ambient[None, :]  # formula 4
-    cap = np.maximum(unshot_power, 0.0)[None, :] / area[:, None]
-    return np.minimum(amount, cap)  # formula 5
+    amount = unshot + problem.patch_reflectance * ambient_light(problem, state)[None, :]
+    cap = np.maximum(area @ unshot, 0.0)[None, :] / area[:, None]
+    return np.minimum(amount, cap)  # formulas 4 and 5
+
+
+def _raised(problem: DiscreteSystem, state: SolverState) -> np.ndarray:
+    """(P, 3) ``dB + rho Ambient``, the unshot radiosity raised by the ambient light."""
+    return state.unshot + problem.patch_reflectance * ambient_light(problem, state)[None, :]
+
+
+def _positive_amount(
+    problem: DiscreteSystem, state: SolverState, settings: SolveSettings, factors: Any
+) -> np.ndarray:
+    """positive overshooting: shoots what it gathers of the positive unshot radiosity"""
+    return patch_factors.positive_overshoot(state.unshot, factors)
+
+
+def _super_shoot_gather_amount(
+    problem: DiscreteSystem, state: SolverState, settings: SolveSettings, factors: Any
+) -> np.ndarray:
+    """super-shoot-gather: positive overshooting and the shooter's interreflections"""
+    return patch_factors.super_shoot_gather(state.unshot, factors)
+
+
+def _enhanced_amount(
+    problem: DiscreteSystem, state: SolverState, settings: SolveSettings, factors: Any
+) -> np.ndarray:
+    """enhanced super-shoot-gather: super-shoot-gather over ambient-raised unshot radiosity"""
+    raised = _raised(problem, state)
+    return patch_factors.enhanced_super_shoot_gather(
+        state.unshot, raised, problem.patch_area, factors
+    )
 
 
 @dataclass(frozen=True)
@@ -281,10 +221,18 @@ class ShootingMethod:
     damped : bool
         Halve the overshoot whenever the unshot power grows well past its minimum (the
         sign of divergence; see :func:`_guard_growth`).
+    patch_factors : bool
+        Needs patch-to-patch form factors (:mod:`raytrad.core.patch_factors`).
+    selected_by_raised : bool
+        Choose the shooter by ``|dB + rho Ambient|`` (as ambient overshooting, formula
+        9's selection), but never by more than the amount itself: a patch whose shot the
+        energy cap holds back would otherwise be chosen again and again.
     """
 
     amount: ShootAmount
     damped: bool = False
+    patch_factors: bool = False
+    selected_by_raised: bool = False
 
     @property
     def summary(self) -> str:
@@ -297,6 +245,11 @@ SHOOTING_METHODS: dict[str, ShootingMethod] = {
     "progressive": ShootingMethod(_progressive_amount),
     "overrelaxation": ShootingMethod(_overrelaxation_amount),
     "ambient": ShootingMethod(_ambient_amount, damped=True),
+    "positive": ShootingMethod(_positive_amount, patch_factors=True),
+    "super_shoot_gather": ShootingMethod(_super_shoot_gather_amount, patch_factors=True),
+    "enhanced_super_shoot_gather": ShootingMethod(
+        _enhanced_amount, damped=True, patch_factors=True, selected_by_raised=True
+    ),
 }
 
 
@@ -370,7 +323,13 @@ def solve(
     state = state or new_state(mesh, problem)
     if state.entry_shot.shape != (len(problem.entry_patch), 3):
         raise SolverError("the state to resume was made for another mesh")
-    amount_of = SHOOTING_METHODS[settings.method].amount
+    method = SHOOTING_METHODS[settings.method]
+    factors = None
+    if method.patch_factors:
+        patch_factors.check_patch_factor_memory(mesh.patch_count, settings.method)
+        factors = patch_factors.PatchFactors.from_columns(
+            problem, engine, problem.receiver_reflectance
+        )
     area = problem.patch_area
     everyone = np.arange(mesh.receiver_count)
     emitted = area @ problem.average(everyone, problem.receiver_emission)
@@ -389,8 +348,11 @@ def solve(
             reason = "interrupted"
         if reason:
             break
-        amount = amount_of(problem, state, settings)
-        magnitude = area * (np.abs(amount) + state.spread).sum(axis=1)
+        amount = method.amount(problem, state, settings, factors)
+        chosen_by = np.abs(amount)
+        if method.selected_by_raised:  # but never by more than the patch would shoot
+            chosen_by = np.minimum(np.abs(_raised(problem, state)), chosen_by)
+        magnitude = area * (chosen_by + state.spread).sum(axis=1)
         patch = int(np.argmax(magnitude))
         if magnitude[patch] <= 0:
             reason = "converged"

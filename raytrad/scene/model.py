@@ -245,16 +245,15 @@ def validate_scene(scene: Scene) -> Scene:
     if bad.any():
         raise SceneError(
             src,
-            f"{int(bad.sum())} vertices have NaN or infinite coordinates "
-            f"(first: vertex {int(used[bad][0])})",
+            f"{_vertices(int(bad.sum()))} NaN or infinite coordinates (or numbers beyond "
+            "the range of the file's number type)",
         )
     huge = np.abs(scene.positions[used]).max(axis=1) > FLOAT32_MAX
     if huge.any():
         raise SceneError(
             src,
-            f"{int(huge.sum())} vertices have coordinates beyond the float32 range "
-            f"(first: vertex {int(used[huge][0])} at {scene.positions[used[huge][0]].tolist()}); "
-            "check the units or --scale",
+            f"{_vertices(int(huge.sum()))} coordinates beyond the float32 range (such as "
+            f"{scene.positions[used[huge][0]].tolist()}); check the units or --scale",
         )
     nm = len(scene.material_names)
     if scene.material_index.min() < 0 or scene.material_index.max() >= nm:
@@ -289,6 +288,10 @@ def validate_scene(scene: Scene) -> Scene:
         log.warning("%s: dropped %d zero-area triangles", src or "<scene>", int(degenerate.sum()))
         scene = scene.select(~degenerate)
     return scene
+
+
+def _vertices(count: int) -> str:
+    return "1 vertex has" if count == 1 else f"{count} vertices have"
 
 
 def _check_objects(scene: Scene) -> None:

@@ -54,15 +54,17 @@ def test_white_furnace(
     # rho tol A E / (1 - rho) of missing power: an area-weighted mean relative error of
     # rho * tol, plus what balancing the vertex-to-patch factors leaves (well below tol
     # here). The unshot radiosity left is not spread evenly: it sits where near receivers
-    # gather along the box's edges, a fixed multiple (about 2.3) of the tolerance there
-    # whatever the tolerance. No receiver may be off by more than three times it.
+    # gather along the box's edges, a fixed multiple of the tolerance there whatever the
+    # tolerance: about 2.3 for the methods that shoot what they have, 3.2 for enhanced
+    # super-shoot-gather, which leaves its (signed) remainder where it overshot. No
+    # receiver may be off by more than four times it.
     prepared = prepare_furnace(reflectance, 1.0)
     result = _solve(prepared, method=method, tolerance=tolerance)
     assert result.stop_reason == "converged"
     area = prepared.mesh.receiver_area
     relative = np.abs(result.radiosity * (1.0 - reflectance) - 1.0)
     assert (area @ relative / area.sum() <= tolerance).all()
-    assert relative.max() <= 3.0 * tolerance
+    assert relative.max() <= 4.0 * tolerance
 
 
 @pytest.mark.parametrize("method", METHODS)
@@ -261,7 +263,7 @@ def test_compiled_shot_agrees_with_numpy_shot(
 ) -> None:
     """The compiled shot (one loop per column) against :func:`numpy_shoot`, its reference:
     the same shots, radiosity and energy ledger to rounding, near-field gathers included."""
-    settings = SolveSettings(method=method, max_shots=300)
+    settings = SolveSettings(method=method, max_shots=300, tolerance=1e-9)
     fast = solve(cornell.mesh, cornell.engine, settings)
     monkeypatch.setattr(solver, "_shoot", solver.numpy_shoot)
     slow = solve(cornell.mesh, cornell.engine, settings)
