@@ -63,11 +63,23 @@ class PatchFactors:
 
     Attributes
     ----------
-    reflected : (P, P, 3) float64
-        ``K[i, j, c]`` [1].
+    reflected : (3, P, P) float64
+        ``reflected[c, i, j] = K_ijc`` [1], one matrix per channel (so gathering is one
+        BLAS product per channel).
+    return_share : (P, 3) float64
+        ``sum_j K_ij K_ji``: the share of a patch's shot that one bounce brings back to
+        it (formula 7), computed once.
     """
 
     reflected: np.ndarray
+    return_share: np.ndarray
+
+    @classmethod
+    def from_matrix(cls, reflected: np.ndarray) -> PatchFactors:
+        """From (3, P, P) reflected factors."""
+        reflected = np.ascontiguousarray(reflected, dtype=np.float64)
+        returned = np.einsum("cij,cji->ic", reflected, reflected)
+        return cls(reflected, returned)
 
     @classmethod
     def from_columns(
@@ -78,21 +90,20 @@ class PatchFactors:
         log.info(
             "patch-to-patch form factors: %d x %d, %.1f MiB", count, count, patch_factor_mb(count)
         )
-        reflected = np.empty((count, count, 3))
+        reflected = np.empty((3, count, count))
         for j in range(count):
             column = engine.column(j)
             values = receiver_reflectance[column.receivers] * column.factors[:, None]
-            reflected[:, j, :] = problem.average(column.receivers, values)
-        return cls(reflected)
+            reflected[:, :, j] = problem.average(column.receivers, values).T
+        return cls.from_matrix(reflected)
 
     def gathered(self, unshot: np.ndarray) -> np.ndarray:
         """(P, 3) ``sum_j K_ij dB_j``: what each patch will reflect of ``unshot`` [W m-2]."""
-        return np.einsum("ijc,jc->ic", self.reflected, unshot)
+        return np.stack([self.reflected[c] @ unshot[:, c] for c in range(3)], axis=1)
 
     def returned(self) -> np.ndarray:
-        """(P, 3) ``sum_j K_ij K_ji``: the share of a patch's shot that one bounce brings
-        back to it (formula 7)."""
-        return np.einsum("ijc,jic->ic", self.reflected, self.reflected)
+        """(P, 3) ``sum_j K_ij K_ji`` (formula 7; :attr:`return_share`)."""
+        return self.return_share
 
 
 def _only_positive(amount: np.ndarray, unshot: np.ndarray) -> np.ndarray:

@@ -30,7 +30,7 @@ def test_closed_rows_reflect_their_reflectance(prepare_furnace: Callable[..., Pr
     prepared = prepare_furnace(0.8, 1.0)
     problem = DiscreteSystem.from_mesh(prepared.mesh)
     factors = PatchFactors.from_columns(problem, prepared.engine, problem.receiver_reflectance)
-    np.testing.assert_allclose(factors.reflected.sum(axis=1), 0.8, rtol=1e-9)
+    np.testing.assert_allclose(factors.reflected.sum(axis=2), 0.8, rtol=1e-9)
     # one bounce returns rho^2 sum_j F_ij F_ji of a shot, below rho^2
     returned = factors.returned()
     assert (returned > 0).all() and (returned < 0.64).all()
