@@ -88,7 +88,11 @@ def test_method_summaries_come_from_the_registry() -> None:
         assert summaries[name] and summaries[name] == method.summary
         assert method.amount.__doc__ is not None
         assert method.amount.__doc__.strip().startswith(summaries[name])
-    assert [n for n, m in SHOOTING_METHODS.items() if m.damped] == ["ambient"]
+    # the methods whose overshoot rests on the ambient estimate are damped when it misleads
+    damped = [n for n, m in SHOOTING_METHODS.items() if m.damped]
+    assert damped == ["ambient", "enhanced_super_shoot_gather"]
+    gathering = [n for n, m in SHOOTING_METHODS.items() if m.patch_factors]
+    assert gathering == ["positive", "super_shoot_gather", "enhanced_super_shoot_gather"]
 
 
 def test_system_settings_are_the_mesh_and_the_scale() -> None:
