@@ -232,9 +232,8 @@ def parse_mtl(
         if not words or words[0].startswith("#"):
             continue
         keyword = words[0].lower()
-        if keyword == "newmtl":
-            name = line.strip()[len("newmtl") :].strip()
-            current = materials.setdefault(name, {})
+        if keyword == "newmtl":  # names as the OBJ's usemtl reads them: single-spaced
+            current = materials.setdefault(" ".join(words[1:]), {})
         elif keyword in MTL_COLOURS:
             if current is None:
                 warn(f"{label} line {number}: {words[0]} before any newmtl; line ignored")
