@@ -269,6 +269,7 @@ def _plain_primitive(
             raise source.error(f"{what}: TEXCOORD_0 must be VEC2 with one entry per vertex")
         plain["attributes"]["TEXCOORD_0"] = writer.add(uv, "<f4", "VEC2")
     if "material" in primitive:
+        source.item("materials", primitive["material"], what)
         plain["material"] = primitive["material"]
     return plain
 
@@ -301,7 +302,10 @@ def _check_nodes(source: _Document) -> None:
             raise source.error(f"node {n} is not an object")
         if "mesh" in node:
             source.item("meshes", node["mesh"], f"node {n}")
-        for child in node.get("children", []):
+        children = node.get("children", [])
+        if not isinstance(children, list):
+            raise source.error(f"node {n}: children is not a list")
+        for child in children:
             source.item("nodes", child, f"node {n}")
             if child in parent or child == n:
                 raise source.error(f"node {child} has more than one parent (or is its own)")
@@ -315,7 +319,10 @@ def _check_nodes(source: _Document) -> None:
             at = parent[at]
     scenes = source.json.get("scenes", [])
     for s, scene in enumerate(scenes if isinstance(scenes, list) else []):
-        for root in scene.get("nodes", []) if isinstance(scene, dict) else []:
+        roots = scene.get("nodes", []) if isinstance(scene, dict) else []
+        if not isinstance(roots, list):
+            raise source.error(f"scene {s}: nodes is not a list")
+        for root in roots:
             source.item("nodes", root, f"scene {s}")
     if "scene" in source.json:
         source.item("scenes", source.json["scene"], "the default scene")

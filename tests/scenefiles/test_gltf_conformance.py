@@ -230,6 +230,10 @@ def _broken(gltf: Gltf, case: str) -> None:
         doc["accessors"][0]["count"] = 400
     elif case == "missing default scene":
         doc["scene"] = 3
+    elif case == "primitive refers to a missing material":
+        doc["meshes"][0]["primitives"][0]["material"] = 99
+    elif case == "children not a list":
+        doc["nodes"][0]["children"] = 5
     elif case == "index count not a multiple of 3":
         doc["meshes"][0]["primitives"][0]["indices"] = gltf.accessor([0, 1, 2, 3], "u2")
 
@@ -246,6 +250,8 @@ BROKEN = {
     "accessor past its view": "accessor 0 needs 4800 bytes of its bufferView",
     "missing default scene": "the default scene refers to scenes 3",
     "index count not a multiple of 3": "4 indices do not make whole triangles",
+    "primitive refers to a missing material": "refers to materials 99, which does not exist",
+    "children not a list": "node 0: children is not a list",
 }
 
 
