@@ -392,11 +392,20 @@ class _Progress:
             self._bar.close()
 
 
+#: Signals that stop a render cleanly, as Ctrl-C does: schedulers and container runtimes
+#: stop work with SIGTERM, a closed terminal sends SIGHUP.
+_STOP_SIGNALS = tuple(
+    getattr(signal, name) for name in ("SIGINT", "SIGTERM", "SIGHUP") if hasattr(signal, name)
+)
+
+
 class _StopFlag:
-    """First Ctrl-C asks the solve to stop cleanly (then a checkpoint is written)."""
+    """The first Ctrl-C, SIGTERM or SIGHUP asks the run to stop cleanly (the results so far
+    and a checkpoint are written); a second Ctrl-C aborts."""
 
     def __init__(self) -> None:
         self.requested = False
+        self.signum = 0
 
     def __call__(self) -> bool:
         return self.requested
@@ -405,6 +414,7 @@ class _StopFlag:
         if self.requested:
             raise KeyboardInterrupt
         self.requested = True
+        self.signum = signum
         print(
             "\nraytrad: stopping after the current column or shot, then writing the "
             "results and a checkpoint (Ctrl-C again to abort)",
@@ -517,7 +527,7 @@ def _render(args: argparse.Namespace) -> int:
     settings = _settings(args, args.method)
     progress = _Progress(enabled=not args.quiet)
     stop = _StopFlag()
-    previous = signal.signal(signal.SIGINT, stop.handler)
+    previous = {signum: signal.signal(signum, stop.handler) for signum in _STOP_SIGNALS}
     try:
         outcome = api.render(
             args.scene,
@@ -530,11 +540,14 @@ def _render(args: argparse.Namespace) -> int:
             plot=args.plot,
         )
     finally:
-        signal.signal(signal.SIGINT, previous)
+        for signum, handler in previous.items():
+            signal.signal(signum, handler)
         progress.close()
     if not args.quiet:
         _print_summary(outcome.report, outcome.outputs)
-    return 130 if outcome.result.stop_reason == "interrupted" else 0
+    if outcome.result.stop_reason == "interrupted":
+        return 128 + (stop.signum or signal.SIGINT)  # 130 for Ctrl-C, 143 for SIGTERM
+    return 0
 
 
 def _share(part: int, whole: int) -> str:

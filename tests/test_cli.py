@@ -5,6 +5,7 @@ from __future__ import annotations
 import itertools
 import json
 import logging
+import signal
 import subprocess
 import sys
 from pathlib import Path
@@ -351,3 +352,38 @@ def test_an_internal_fault_is_one_line_and_a_traceback_with_v(
             run_cli([*argv[:-1], "-v"], capsys)
     else:
         assert "out of memory" in lines[0]
+
+
+@pytest.mark.skipif(not hasattr(signal, "SIGTERM") or sys.platform == "win32", reason="POSIX")
+def test_sigterm_stops_cleanly_with_a_checkpoint_and_resumes(tmp_path: Path) -> None:
+    """SIGTERM (how schedulers stop work) is handled like Ctrl-C: the results so far, the
+    report marked interrupted and a checkpoint are written, the exit status is 143, and
+    --resume finishes to the uninterrupted answer."""
+    scene = tmp_path / "cornell.obj"
+    write_obj(cornell_box(), scene)
+    out = tmp_path / "out"
+    argv = [sys.executable, "-m", "raytrad", "render", str(scene), "-o", str(out)]
+    argv += ["--receivers", "800", "--patches", "60", "--tolerance", "1e-4"]
+    process = subprocess.Popen(argv, stderr=subprocess.PIPE, text=True)
+    assert process.stderr is not None
+    for line in process.stderr:  # the scene is loaded: the handler is in place
+        if "triangles" in line:
+            process.send_signal(signal.SIGTERM)
+            break
+    process.stderr.read()
+    assert process.wait(timeout=300) == 128 + signal.SIGTERM
+    report = json.loads((out / "report.json").read_text())
+    assert report["solve"]["stop_reason"] == "interrupted"
+    assert (out / "cornell.checkpoint.npz").is_file() and (out / "cornell.ply").is_file()
+
+    straight = api.render(
+        scene,
+        tmp_path / "straight",
+        RenderSettings(
+            mesh=MeshSettings(receivers=800, patches=60), solve=SolveSettings(tolerance=1e-4)
+        ),
+    )
+    resumed = subprocess.run([*argv, "--resume", "-q"], capture_output=True, text=True)
+    assert resumed.returncode == 0, resumed.stderr
+    _, _, radiosity = read_radiosity_ply(out / "cornell.ply")
+    np.testing.assert_array_equal(radiosity, straight.result.radiosity.astype(np.float32))
