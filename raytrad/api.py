@@ -43,6 +43,7 @@ from raytrad.outputs.comparison import markdown_table, write_comparison
 from raytrad.outputs.plot import plot_convergence
 from raytrad.outputs.report import add_error_log, add_total_error, build_report, write_report
 from raytrad.outputs.resume import checkpoint_path, fingerprint, resume_point, save_state
+from raytrad.outputs.run_manifest import verify_outputs, write_manifest
 from raytrad.outputs.write import check_output_range, write_outputs
 from raytrad.products.framing import file_camera
 from raytrad.products.lightmap import choose_lightmap_uvs
@@ -192,11 +193,8 @@ def make_reference(spec: str, prepared: Prepared) -> Reference:
             raise SettingsError(str(exc)) from exc
         return Reference(radiosity, "analytic", "closed enclosure: B = E / (1 - rho)")
     positions, triangles, radiosity = read_radiosity_ply(spec)
-    return Reference(
-        reference_at_receivers(positions, triangles, radiosity, mesh, spec),
-        "file",
-        f"previous result {spec}",
-    )
+    at_receivers = reference_at_receivers(positions, triangles, radiosity, mesh, spec)
+    return Reference(at_receivers, "file", f"previous result {spec}")
 
 
 def render(
@@ -209,8 +207,8 @@ def render(
     reference: str | None = None,
     plot: bool = False,
 ) -> RenderOutcome:
-    """Load, mesh, solve and write ``<output_dir>/<stem>.ply``, ``report.json`` and every
-    output ``settings`` asks for.
+    """Load, mesh, solve and write ``<output_dir>/<stem>.ply``, ``report.json``, every
+    output ``settings`` asks for, and last the run manifest.
 
     Parameters
     ----------
@@ -290,8 +288,9 @@ def render(
         report["outputs_detail"] = facts
         add_error_log(report, error_log, ref)
         add_total_error(report, error_log, error, refinement, solved.mesh.receiver_count)
-        write_report(output_dir / "report.json", report)
         outputs["report"] = output_dir / "report.json"
+        write_report(outputs["report"], report)
+        outputs["manifest"] = write_manifest(output_dir, outputs, report)  # last of all
     finally:
         prepared.close()
     return RenderOutcome(result, baked, outputs, report, error_log, refinement, error)
@@ -397,4 +396,5 @@ __all__ = [
     "prepare",
     "render",
     "solve_scene",
+    "verify_outputs",
 ]

@@ -47,7 +47,11 @@ def test_render_furnace(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> N
     assert report["energy_watts"]["emitted"] == pytest.approx([6.0, 6.0, 6.0], rel=1e-12)
     assert _ledger_balances(report["energy_watts"])
     # nothing written but the results (no temporary files, no checkpoint)
-    assert sorted(p.name for p in out.iterdir()) == ["furnace.ply", "report.json"]
+    assert sorted(p.name for p in out.iterdir()) == [
+        "furnace.ply",
+        "raytrad-run.json",
+        "report.json",
+    ]
 
 
 def test_max_shots_stops_early_and_says_so(

@@ -18,6 +18,7 @@ from raytrad.formats.images import write_exr, write_png
 from raytrad.formats.ply import write_radiosity_ply
 from raytrad.outputs.gltf import baked_parts, write_baked_glb
 from raytrad.outputs.lightmaps import write_lightmaps
+from raytrad.outputs.run_manifest import invalidate
 from raytrad.products.display import auto_exposure, display_colors, display_encode, fill_hidden
 from raytrad.products.framing import image_view
 from raytrad.products.image import render_radiance, seen_receivers
@@ -55,6 +56,7 @@ def write_outputs(
     facts : dict
         The exposure, lightmap statistics and camera, for ``report.json``.
     """
+    invalidate(output_dir)  # the folder's set is not complete until the manifest is back
     mesh = prepared.mesh
     emitting = np.asarray((mesh.receiver_emitted_exitance > 0).any(axis=1))
     # hidden receivers take their visible neighbours' radiosity in what is shown
