@@ -61,5 +61,7 @@ def test_render_reports_progress_and_applies_the_file_defaults(tmp_path: Path) -
     assert outcome.report["settings"]["exposure"] == 0.0
     stats = outcome.report["outputs_detail"]["lightmap"]
     assert abs(stats["texel_density_median"] / 400.0 - 1.0) < 0.05
-    assert sorted(outcome.outputs) == sorted(["ply", "lightmap", "lightmap_preview", "report"])
+    assert sorted(outcome.outputs) == sorted(
+        ["ply", "lightmap", "lightmap_preview", "report", "manifest"]
+    )
     assert all(path.is_file() for path in outcome.outputs.values())

@@ -205,6 +205,7 @@ def test_convergence_png_is_written(furnace_run: tuple[Path, dict[str, Any]]) ->
     assert sorted(p.name for p in out.iterdir()) == [
         "convergence.png",
         "furnace.ply",
+        "raytrad-run.json",
         "report.json",
     ]
 
