@@ -91,8 +91,8 @@ class _ObjReader:
         return SceneError(self.path, f"cannot parse as OBJ: line {number}: {message}")
 
     def line(self, number: int, line: str) -> None:
-        words = line.split()
-        if not words or words[0].startswith("#"):
+        words = _without_comment(line.split())
+        if not words:
             return
         keyword = words[0]
         if keyword == "v":
@@ -104,7 +104,7 @@ class _ObjReader:
         elif keyword == "f":
             self.face(number, words[1:])
         elif keyword == "mtllib":
-            self.mtllibs.append(line.strip()[len("mtllib") :].strip())
+            self.mtllibs.append(" ".join(words[1:]))
         elif keyword in ("o", "g", "usemtl", "s"):
             self.out.append(" ".join(words))
         # points, lines, curves and surfaces carry no area: not passed on
@@ -190,6 +190,14 @@ class _ObjReader:
             self.out[slot] = "\n".join(face_lines)
 
 
+def _without_comment(words: list[str]) -> list[str]:
+    """The words before the first one that starts a ``#`` comment."""
+    for i, word in enumerate(words):
+        if word.startswith("#"):
+            return words[:i]
+    return words
+
+
 def _face_line(corners: list[list[int]]) -> str:
     """An ``f`` line of absolute corners (0: that index absent)."""
     words = []
@@ -228,8 +236,8 @@ def parse_mtl(
     current: dict[str, tuple[float, float, float]] | None = None
     text = data.decode("utf-8", errors="replace")
     for number, line in enumerate(text.splitlines(), start=1):
-        words = line.split()
-        if not words or words[0].startswith("#"):
+        words = _without_comment(line.split())
+        if not words:
             continue
         keyword = words[0].lower()
         if keyword == "newmtl":  # names as the OBJ's usemtl reads them: single-spaced
@@ -250,11 +258,7 @@ def parse_mtl(
 
 
 def _colour(words: list[str]) -> tuple[float, float, float] | None:
-    """1 or 3 numbers (a trailing ``# comment`` allowed) as an RGB triple, else None."""
-    for i, word in enumerate(words):
-        if word.startswith("#"):
-            words = words[:i]
-            break
+    """1 or 3 numbers as an RGB triple, else None."""
     try:
         values = [float(w) for w in words]
     except ValueError:

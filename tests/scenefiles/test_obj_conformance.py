@@ -63,7 +63,9 @@ FLOOR_AND_LAMP_FILES = {
         "v 1 0 1\n", "v 1 0 1 0.2 0.3 0.4\n"
     ),
     "comments, blank lines, l and p statements": (
-        "# a comment\n\n" + ABSOLUTE + "l 1 2\np 3\n# the end\n"
+        "# a comment\n\n"
+        + ABSOLUTE.replace("f 1 2 3 4", "f 1 2 3 4 # the floor")
+        + "l 1 2\np 3\n# the end\n"
     ),
     "triangles instead of quads": (
         "usemtl floor\n"
@@ -246,7 +248,7 @@ def test_an_mtllib_fifo_is_refused_without_blocking(tmp_path: Path) -> None:
 
 def test_parse_mtl_reads_scalar_colours_and_trailing_comments() -> None:
     warnings: list[str] = []
-    text = b"Kd 1 1 1\nnewmtl a b\nKd 0.25 # grey\nKE 1 2 3\nnewmtl c\nKd 1 2\n"
+    text = b"Kd 1 1 1\nnewmtl a b # two words\nKd 0.25 # grey\nKE 1 2 3\nnewmtl c\nKd 1 2\n"
     materials = parse_mtl("x.mtl", text, warnings.append)
     assert materials == {"a b": {"kd": (0.25,) * 3, "ke": (1.0, 2.0, 3.0)}, "c": {}}
     assert warnings == [
