@@ -28,7 +28,7 @@ from raytrad.core import pipeline
 from raytrad.core.accuracy import ErrorParts
 from raytrad.core.adaptive import Refinement
 from raytrad.core.compare import MethodRun, run_method
-from raytrad.core.convergence import ConvergenceMonitor, ErrorLog, Reference, ResidualTrend
+from raytrad.core.convergence import ConvergenceMonitor, ErrorLog, Reference
 from raytrad.core.pipeline import Prepared, RunBudget, timed
 from raytrad.core.reference import (
     analytic_furnace,
@@ -41,8 +41,10 @@ from raytrad.errors import RaytradError, SettingsError
 from raytrad.formats.ply import read_radiosity_ply
 from raytrad.outputs.comparison import markdown_table, write_comparison
 from raytrad.outputs.plot import plot_convergence
+from raytrad.outputs.progress import RenderProgress, shot_hook
 from raytrad.outputs.report import add_error_log, add_total_error, build_report, write_report
 from raytrad.outputs.resume import checkpoint_path, fingerprint, resume_point, save_state
+from raytrad.outputs.run_lock import RunLock
 from raytrad.outputs.run_manifest import verify_outputs, write_manifest
 from raytrad.outputs.write import check_output_range, write_outputs
 from raytrad.products.framing import file_camera
@@ -56,33 +58,6 @@ log = logging.getLogger(__name__)
 #: How a stopped solve ends; a run that ends so leaves a checkpoint to resume from.
 RESUMABLE = ("interrupted", "time-limit", "max-shots")
 StopPoll = Callable[[], bool] | None
-
-
-@dataclass(frozen=True)
-class RenderProgress:
-    """What a running solve reports after each shot.
-
-    Attributes
-    ----------
-    shots : int
-    seconds : float
-        Solve time so far [s].
-    rays : int
-        Visibility rays cast so far.
-    residual : float
-        Unshot power over emitted power [1].
-    estimate : float
-        Predicted relative RMS error still to come [1] (inf before the first estimate).
-    eta : float
-        Extrapolated seconds to the tolerance [s]; inf while unknown.
-    """
-
-    shots: int
-    seconds: float
-    rays: int
-    residual: float
-    estimate: float
-    eta: float
 
 
 @dataclass
@@ -215,7 +190,8 @@ def render(
     scene_path : path-like
         OBJ (+MTL), glTF 2.0 (.gltf/.glb), PLY or TOML scene file.
     output_dir : path-like
-        Created if missing; outputs are replaced atomically.
+        Created if missing; outputs are replaced atomically. Held by one run at a time
+        (:class:`~raytrad.outputs.run_lock.RunLock`).
     settings : RenderSettings
         What it leaves at None the scene file's ``[output]`` gives (else the defaults).
     resume : bool
@@ -246,79 +222,57 @@ def render(
     camera = None
     if settings.image is not None:
         camera = file_camera(loaded.cameras, settings.image.view, scene_path, loaded.kind)
-    key = fingerprint(loaded.scene, settings.system_settings())
-    checkpoint = checkpoint_path(output_dir, scene_path.stem)
-    state, columns = resume_point(checkpoint, key) if resume else (None, None)
-    prepared = prepare(loaded.scene, settings, budget, columns)
-    timings.update(prepared.timings)
+    with RunLock(output_dir):  # one run at a time in a folder
+        key = fingerprint(loaded.scene, settings.system_settings())
+        checkpoint = checkpoint_path(output_dir, scene_path.stem)
+        state, columns = resume_point(checkpoint, key) if resume else (None, None)
+        prepared = prepare(loaded.scene, settings, budget, columns)
+        timings.update(prepared.timings)
 
-    def save(state: SolverState) -> None:  # with the columns of a pass cut short
-        save_state(checkpoint, state, key, prepared.engine.pass_columns())
+        def save(state: SolverState) -> None:  # with the columns of a pass cut short
+            save_state(checkpoint, state, key, prepared.engine.pass_columns())
 
-    try:
-        ref = None
-        if reference is not None:
-            with timed(timings, "reference"):
-                ref = make_reference(reference, prepared)
-        monitor = ConvergenceMonitor(prepared.mesh, prepared.engine, ref)
-        on_shot = _shot_hook(monitor, progress, settings, save)
-        with timed(timings, "solve"):
-            solve_settings = budget.solve_settings(settings.solve, state.seconds if state else 0)
-            result = solve(prepared.mesh, prepared.engine, solve_settings, state, on_shot, stop)
-        error_log = monitor.finish(result.state)
-        check_output_range(result.radiosity, scene_path)
-        solved = prepared
-        with timed(timings, "refine"):
-            baked, result, refinement = refine(prepared, result, settings, budget)
-        with timed(timings, "error"):
-            error = estimate_error(solved, baked, result, error_log)
-        with timed(timings, "write"):
-            outputs, facts = write_outputs(
-                baked, result, output_dir, scene_path.stem, settings, camera
-            )
-            if plot:
-                outputs["plot"] = output_dir / "convergence.png"
-                plot_convergence(outputs["plot"], {result.method: error_log}, str(scene_path))
-        if result.stop_reason in RESUMABLE:
-            save(result.state)  # --resume continues from here
-            outputs["checkpoint"] = checkpoint
-        elif checkpoint.exists():
-            checkpoint.unlink()
-        report = build_report(scene_path, baked, result, settings, timings, outputs)
-        report["outputs_detail"] = facts
-        add_error_log(report, error_log, ref)
-        add_total_error(report, error_log, error, refinement, solved.mesh.receiver_count)
-        outputs["report"] = output_dir / "report.json"
-        write_report(outputs["report"], report)
-        outputs["manifest"] = write_manifest(output_dir, outputs, report)  # last of all
-    finally:
-        prepared.close()
+        try:
+            ref = None
+            if reference is not None:
+                with timed(timings, "reference"):
+                    ref = make_reference(reference, prepared)
+            monitor = ConvergenceMonitor(prepared.mesh, prepared.engine, ref)
+            on_shot = shot_hook(monitor, progress, settings, save)
+            with timed(timings, "solve"):
+                solve_settings = budget.solve_settings(
+                    settings.solve, state.seconds if state else 0
+                )
+                result = solve(prepared.mesh, prepared.engine, solve_settings, state, on_shot, stop)
+            error_log = monitor.finish(result.state)
+            check_output_range(result.radiosity, scene_path)
+            solved = prepared
+            with timed(timings, "refine"):
+                baked, result, refinement = refine(prepared, result, settings, budget)
+            with timed(timings, "error"):
+                error = estimate_error(solved, baked, result, error_log)
+            with timed(timings, "write"):
+                outputs, facts = write_outputs(
+                    baked, result, output_dir, scene_path.stem, settings, camera
+                )
+                if plot:
+                    outputs["plot"] = output_dir / "convergence.png"
+                    plot_convergence(outputs["plot"], {result.method: error_log}, str(scene_path))
+            if result.stop_reason in RESUMABLE:
+                save(result.state)  # --resume continues from here
+                outputs["checkpoint"] = checkpoint
+            elif checkpoint.exists():
+                checkpoint.unlink()
+            report = build_report(scene_path, baked, result, settings, timings, outputs)
+            report["outputs_detail"] = facts
+            add_error_log(report, error_log, ref)
+            add_total_error(report, error_log, error, refinement, solved.mesh.receiver_count)
+            outputs["report"] = output_dir / "report.json"
+            write_report(outputs["report"], report)
+            outputs["manifest"] = write_manifest(output_dir, outputs, report)  # last of all
+        finally:
+            prepared.close()
     return RenderOutcome(result, baked, outputs, report, error_log, refinement, error)
-
-
-def _shot_hook(
-    monitor: ConvergenceMonitor,
-    progress: Callable[[RenderProgress], None] | None,
-    settings: RenderSettings,
-    save: Callable[[SolverState], None],
-) -> Callable[[SolverState, float], None]:
-    """The solver's per-shot hook: log the error, report progress, checkpoint periodically."""
-    trend = ResidualTrend(settings.solve.tolerance)
-    last_save = [time.perf_counter()]
-
-    def on_shot(state: SolverState, residual: float) -> None:
-        monitor(state, residual)
-        if progress is not None:
-            eta = trend.add(state.seconds, residual)
-            estimate = monitor.latest_estimate
-            progress(
-                RenderProgress(state.shots, state.seconds, state.rays, residual, estimate, eta)
-            )
-        if time.perf_counter() - last_save[0] >= settings.checkpoint_seconds:
-            save(state)
-            last_save[0] = time.perf_counter()
-
-    return on_shot
 
 
 def compare(

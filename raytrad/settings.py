@@ -143,6 +143,10 @@ class RenderSettings:
             raise SettingsError(f"scale must be a positive number, got {self.scale}")
         if not (self.cache_mb >= 0 and math.isfinite(self.cache_mb)):
             raise SettingsError(f"cache must be a finite number >= 0 MiB, got {self.cache_mb}")
+        if not (self.checkpoint_seconds > 0 and math.isfinite(self.checkpoint_seconds)):
+            raise SettingsError(
+                f"checkpoint interval must be a finite number > 0 s, got {self.checkpoint_seconds}"
+            )
         if self.exposure is not None and not math.isfinite(self.exposure):
             raise SettingsError(f"exposure must be a finite number of stops, got {self.exposure}")
         self.check_method(self.solve.method)

@@ -153,6 +153,8 @@ def test_bad_scene_is_one_line_and_writes_nothing(
     ("option", "value", "word"),
     [
         ("--exposure", "nan", "exposure"),
+        ("--checkpoint-every", "0", "checkpoint interval"),
+        ("--checkpoint-every", "nan", "checkpoint interval"),
         ("--exposure", "inf", "exposure"),
         ("--cache-mb", "nan", "cache"),
         ("--receivers", "1000000000000", "receivers"),

@@ -189,6 +189,7 @@ def _settings(args: argparse.Namespace, method: str) -> RenderSettings:
         scale=args.scale,
         allow_outside_files=args.allow_outside_files,
         cache_mb=args.cache_mb,
+        checkpoint_seconds=args.checkpoint_every,
         **extra,
     )
 

@@ -349,5 +349,12 @@ def _add_common(parser: argparse.ArgumentParser, default_tolerance: float) -> No
         metavar="MIB",
         help="memory for reusing form factors between shots of a patch (default: %(default)s)",
     )
+    add(
+        "--checkpoint-every",
+        type=float,
+        default=RenderSettings().checkpoint_seconds,
+        metavar="SECONDS",
+        help="seconds between checkpoints of a long solve (default: %(default)s)",
+    )
     add("-q", "--quiet", action="store_true", help="no progress bar, only warnings and errors")
     add("-v", "--verbose", action="store_true", help="log details")

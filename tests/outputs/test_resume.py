@@ -17,7 +17,7 @@ from raytrad.outputs.resume import difference, fingerprint, load_state, save_sta
 from raytrad.scene.builtin import cornell_box, furnace_box
 from raytrad.scenefiles import write_obj
 from raytrad.settings import MeshSettings, RenderSettings
-from tests.conftest import run_cli
+from tests.conftest import SCENES, run_cli
 
 SETTINGS = RenderSettings(mesh=MeshSettings(receivers=600, patches=40))
 SMALL = ["--receivers", "600", "--patches", "40", "-q"]
@@ -177,3 +177,20 @@ def test_columns_of_a_cut_pass_round_trip(tmp_path: Path) -> None:
     save_state(path, _state(2), key, columns)
     with pytest.raises(RaytradError, match=r"c\.npz: cannot read checkpoint"):
         resume_point(path, key)
+
+
+def test_checkpoints_are_written_every_interval(tmp_path: Path) -> None:
+    """--checkpoint-every: with a tiny interval the checkpoint exists during the solve (a
+    crash then loses at most that much work); a converged run removes it at the end."""
+    seen: list[bool] = []
+    checkpoint = tmp_path / "furnace.checkpoint.npz"
+    settings = RenderSettings(mesh=MeshSettings(receivers=400, patches=40), checkpoint_seconds=1e-6)
+    outcome = api.render(
+        SCENES / "furnace.obj",
+        tmp_path,
+        settings,
+        progress=lambda report: seen.append(checkpoint.is_file()),
+    )
+    assert outcome.result.stop_reason == "converged"
+    assert len(seen) > 2 and all(seen[1:])  # saved after every shot from the first on
+    assert not checkpoint.exists()

@@ -1,0 +1,64 @@
+"""What a running render reports after each shot, and the solver hook that reports it
+(logging the error estimate, extrapolating the time left, checkpointing periodically)."""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+
+from raytrad.core.convergence import ConvergenceMonitor, ResidualTrend
+from raytrad.core.solver import SolverState
+from raytrad.settings import RenderSettings
+
+
+@dataclass(frozen=True)
+class RenderProgress:
+    """What a running solve reports after each shot.
+
+    Attributes
+    ----------
+    shots : int
+    seconds : float
+        Solve time so far [s].
+    rays : int
+        Visibility rays cast so far.
+    residual : float
+        Unshot power over emitted power [1].
+    estimate : float
+        Predicted relative RMS error still to come [1] (inf before the first estimate).
+    eta : float
+        Extrapolated seconds to the tolerance [s]; inf while unknown.
+    """
+
+    shots: int
+    seconds: float
+    rays: int
+    residual: float
+    estimate: float
+    eta: float
+
+
+def shot_hook(
+    monitor: ConvergenceMonitor,
+    progress: Callable[[RenderProgress], None] | None,
+    settings: RenderSettings,
+    save: Callable[[SolverState], None],
+) -> Callable[[SolverState, float], None]:
+    """The solver's per-shot hook: log the error, report progress, checkpoint periodically."""
+    trend = ResidualTrend(settings.solve.tolerance)
+    last_save = [time.perf_counter()]
+
+    def on_shot(state: SolverState, residual: float) -> None:
+        monitor(state, residual)
+        if progress is not None:
+            eta = trend.add(state.seconds, residual)
+            estimate = monitor.latest_estimate
+            progress(
+                RenderProgress(state.shots, state.seconds, state.rays, residual, estimate, eta)
+            )
+        if time.perf_counter() - last_save[0] >= settings.checkpoint_seconds:
+            save(state)
+            last_save[0] = time.perf_counter()
+
+    return on_shot
