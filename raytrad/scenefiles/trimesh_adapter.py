@@ -1,8 +1,10 @@
 """The one module that imports :mod:`trimesh`, lazily: OBJ, glTF and PLY parsing.
 
-trimesh parses the geometry and the scene graph; raytrad reads material values itself
-(the readers hand trimesh name-only tokens), so what crosses this adapter is geometry,
-node transforms, material *names* and the raw ``kwargs`` of MTL materials.
+trimesh parses the scene graph, plain triangles and binary PLY; raytrad reads material
+values, OBJ indices and glTF accessors itself (the readers hand trimesh name-only tokens
+and rewritten files, and serve every referenced file from memory through
+:func:`bytes_resolver`), so what crosses this adapter is geometry, node transforms and
+material *names*.
 """
 
 from __future__ import annotations
@@ -81,15 +83,6 @@ def material_name(geometry: Any) -> str | None:
     """The name of a trimesh geometry's material, None without one."""
     name = getattr(getattr(geometry.visual, "material", None), "name", None)
     return name if isinstance(name, str) else None
-
-
-def material_values(geometry: Any) -> dict[str, Any] | None:
-    """The raw MTL values (``kd``, ``ke``...) trimesh kept of a geometry's material, or None
-    when the geometry has no material."""
-    material = getattr(geometry.visual, "material", None)
-    if material is None:
-        return None
-    return dict(getattr(material, "kwargs", None) or {})
 
 
 def node_object(tm_scene: Any, node: str) -> str:
