@@ -1,14 +1,7 @@
-"""The Python API: load -> prepare -> solve -> write, in one call or step by step.
-
->>> from raytrad import api
->>> outcome = api.render("scenes/cornell-box.obj", "out")          # doctest: +SKIP
->>> outcome.result.radiosity.shape                                  # doctest: +SKIP
-(20184, 3)
->>> loaded = api.load("scenes/furnace.obj")                         # doctest: +SKIP
->>> prepared, result = api.solve_scene(loaded.scene)                # nothing written
-
-Each step lives in its own layer (``docs/architecture.md``): scene files, the radiosity
-core, bake products and outputs; this module only joins them.
+"""The Python API: load -> prepare -> solve -> write, in one call (:func:`render`) or step
+by step; ``docs/api.md`` has runnable examples. Each step lives in its own layer
+(``docs/architecture.md``); this module only joins them. Its public names are re-exported
+from :mod:`raytrad`.
 """
 
 from __future__ import annotations
@@ -20,32 +13,37 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 
 from raytrad.core import pipeline
 from raytrad.core.accuracy import ErrorParts
 from raytrad.core.adaptive import Refinement
-from raytrad.core.compare import MethodRun, run_method
+from raytrad.core.compare import compare_methods
 from raytrad.core.convergence import ConvergenceMonitor, ErrorLog, Reference
 from raytrad.core.pipeline import Prepared, RunBudget, timed
 from raytrad.core.reference import (
-    analytic_furnace,
     automatic_reference,
-    dense_solve,
+    named_reference,
     reference_at_receivers,
 )
-from raytrad.core.solver import SHOOTING_METHODS, SolveResult, SolverState, solve
+from raytrad.core.solver import SHOOTING_METHODS, SolveResult, SolverState
+from raytrad.core.solver import solve as solve_system
 from raytrad.errors import RaytradError, SettingsError
 from raytrad.formats.ply import read_radiosity_ply
 from raytrad.outputs.comparison import markdown_table, write_comparison
 from raytrad.outputs.plot import plot_convergence
-from raytrad.outputs.progress import RenderProgress, shot_hook
+from raytrad.outputs.progress import RenderProgress, pass_hook, shot_hook
 from raytrad.outputs.report import add_error_log, add_total_error, build_report, write_report
 from raytrad.outputs.resume import checkpoint_path, fingerprint, resume_point, save_state
 from raytrad.outputs.run_lock import RunLock
-from raytrad.outputs.run_manifest import verify_outputs, write_manifest
+from raytrad.outputs.run_manifest import (
+    complete_set_key,
+    content_key,
+    verify_outputs,
+    write_manifest,
+)
 from raytrad.outputs.write import check_output_range, write_outputs
 from raytrad.products.framing import file_camera
 from raytrad.products.lightmap import choose_lightmap_uvs
@@ -93,12 +91,53 @@ def load(path: str | os.PathLike[str], settings: RenderSettings | None = None) -
 
 
 def prepare(
-    scene: Scene, settings: RenderSettings | None = None, stop: StopPoll = None, columns: Any = None
+    scene: Scene,
+    settings: RenderSettings | None = None,
+    stop: StopPoll = None,
+    columns: Any = None,
+    on_column: Any = None,
 ) -> Prepared:
     """Repair, mesh and balance ``scene`` (:func:`raytrad.core.pipeline.prepare`: ``stop``
-    cuts the form-factor pass short, ``columns`` of an earlier one are reused)."""
+    cuts the form-factor pass short, ``columns`` of an earlier one are reused,
+    ``on_column(mesh, engine)`` follows each column)."""
     settings = settings or RenderSettings()
-    return pipeline.prepare(scene, settings.mesh, settings.cache_mb, stop, columns)
+    return pipeline.prepare(scene, settings.mesh, settings.cache_mb, stop, columns, on_column)
+
+
+def solve(
+    prepared: Prepared,
+    settings: RenderSettings | None = None,
+    state: SolverState | None = None,
+    stop: StopPoll = None,
+) -> SolveResult:
+    """Shoot until ``settings.solve`` says stop (:func:`raytrad.core.solver.solve`);
+    ``state`` (``result.state`` of an earlier solve) continues it, ``stop`` ends it early."""
+    settings = settings or RenderSettings()
+    return solve_system(prepared.mesh, prepared.engine, settings.solve, state, None, stop)
+
+
+def write(
+    prepared: Prepared,
+    result: SolveResult,
+    output_dir: str | os.PathLike[str],
+    settings: RenderSettings | None = None,
+    stem: str = "scene",
+) -> dict[str, Path]:
+    """Write ``<stem>.ply`` and the outputs ``settings`` asks for (lightmap, image, glb)
+    into ``output_dir`` atomically, then its run manifest; no report. Call it several times
+    with other settings and folders to write several sets from one solve.
+
+    Returns
+    -------
+    dict of str to Path, each file written by key (``ply``, ``lightmap``, ``manifest``...).
+    """
+    settings = with_scene_defaults(settings or RenderSettings(), {})
+    output_dir = Path(output_dir)
+    with RunLock(output_dir):
+        outputs, _ = write_outputs(prepared, result, output_dir, stem, settings)
+        stopped = {"solve": {"stop_reason": result.stop_reason}}
+        outputs["manifest"] = write_manifest(output_dir, outputs, stopped)
+    return outputs
 
 
 def solve_scene(
@@ -108,7 +147,7 @@ def solve_scene(
     settings = settings or RenderSettings()
     prepared = prepare(scene, settings)
     try:
-        result = solve(prepared.mesh, prepared.engine, settings.solve)
+        result = solve_system(prepared.mesh, prepared.engine, settings.solve)
         prepared, result, _ = refine(prepared, result, settings)
     finally:
         prepared.close()
@@ -150,25 +189,10 @@ def make_reference(spec: str, prepared: Prepared) -> Reference:
     RaytradError
         When the reference does not apply to this scene.
     """
-    mesh = prepared.mesh
-    if spec == "dense":
-        try:
-            radiosity = dense_solve(mesh, prepared.engine)
-        except ValueError as exc:
-            raise SettingsError(f"{exc}; use fewer patches or a previous result") from exc
-        return Reference(radiosity, "dense", "direct solve of the same discrete system")
-    if spec == "analytic":
-        if prepared.occluder is not None:
-            raise SettingsError(
-                "the analytic reference B = E/(1-rho) needs a closed convex enclosure"
-            )
-        try:
-            radiosity = analytic_furnace(mesh)
-        except ValueError as exc:
-            raise SettingsError(str(exc)) from exc
-        return Reference(radiosity, "analytic", "closed enclosure: B = E / (1 - rho)")
+    if spec in ("dense", "analytic"):
+        return named_reference(spec, prepared.mesh, prepared.engine, prepared.occluder is not None)
     positions, triangles, radiosity = read_radiosity_ply(spec)
-    at_receivers = reference_at_receivers(positions, triangles, radiosity, mesh, spec)
+    at_receivers = reference_at_receivers(positions, triangles, radiosity, prepared.mesh, spec)
     return Reference(at_receivers, "file", f"previous result {spec}")
 
 
@@ -176,7 +200,7 @@ def render(
     scene_path: str | os.PathLike[str],
     output_dir: str | os.PathLike[str],
     settings: RenderSettings | None = None,
-    resume: bool = False,
+    resume: bool | Literal["auto"] = False,
     progress: Callable[[RenderProgress], None] | None = None,
     stop: Callable[[], bool] | None = None,
     reference: str | None = None,
@@ -194,9 +218,10 @@ def render(
         (:class:`~raytrad.outputs.run_lock.RunLock`).
     settings : RenderSettings
         What it leaves at None the scene file's ``[output]`` gives (else the defaults).
-    resume : bool
+    resume : bool or "auto"
         Continue from ``<output_dir>/<stem>.checkpoint.npz`` if it exists (refused, naming
-        what changed, when it was made for another scene or other mesh settings).
+        what changed, when it was made for another scene or other mesh settings; with
+        ``"auto"``, as batch jobs do, such a checkpoint is passed over with a warning).
     progress : callable or None
         ``progress(RenderProgress)`` after each shot.
     stop : callable or None
@@ -225,12 +250,15 @@ def render(
     with RunLock(output_dir):  # one run at a time in a folder
         key = fingerprint(loaded.scene, settings.system_settings())
         checkpoint = checkpoint_path(output_dir, scene_path.stem)
-        state, columns = resume_point(checkpoint, key) if resume else (None, None)
-        prepared = prepare(loaded.scene, settings, budget, columns)
-        timings.update(prepared.timings)
+        strict = resume is True
+        state, columns = resume_point(checkpoint, key, strict) if resume else (None, None)
 
-        def save(state: SolverState) -> None:  # with the columns of a pass cut short
-            save_state(checkpoint, state, key, prepared.engine.pass_columns())
+        def save(state: SolverState, engine: Any = None) -> None:  # with a pass's columns
+            save_state(checkpoint, state, key, (engine or prepared.engine).pass_columns())
+
+        on_column = pass_hook(save, settings.checkpoint_seconds)  # a long pass is saved too
+        prepared = prepare(loaded.scene, settings, budget, columns, on_column)
+        timings.update(prepared.timings)
 
         try:
             ref = None
@@ -243,7 +271,9 @@ def render(
                 solve_settings = budget.solve_settings(
                     settings.solve, state.seconds if state else 0
                 )
-                result = solve(prepared.mesh, prepared.engine, solve_settings, state, on_shot, stop)
+                result = solve_system(
+                    prepared.mesh, prepared.engine, solve_settings, state, on_shot, stop
+                )
             error_log = monitor.finish(result.state)
             check_output_range(result.radiosity, scene_path)
             solved = prepared
@@ -269,10 +299,33 @@ def render(
             add_total_error(report, error_log, error, refinement, solved.mesh.receiver_count)
             outputs["report"] = output_dir / "report.json"
             write_report(outputs["report"], report)
-            outputs["manifest"] = write_manifest(output_dir, outputs, report)  # last of all
+            made_from = content_key(loaded, settings)
+            outputs["manifest"] = write_manifest(output_dir, outputs, report, made_from)  # last
         finally:
             prepared.close()
     return RenderOutcome(result, baked, outputs, report, error_log, refinement, error)
+
+
+def outputs_current(
+    scene_path: str | os.PathLike[str],
+    output_dir: str | os.PathLike[str],
+    settings: RenderSettings | None = None,
+) -> bool:
+    """Whether ``output_dir`` holds a complete render of ``scene_path`` with ``settings``
+    by this raytrad version: the set verifies (:func:`verify_outputs`), its run was not
+    interrupted, and its manifest holds the :func:`~raytrad.outputs.run_manifest.content_key`
+    of the scene as it loads now. ``raytrad bake`` skips such jobs.
+
+    Raises
+    ------
+    SceneError
+        The scene cannot be read (so a broken scene fails even beside old outputs).
+    """
+    if (key := complete_set_key(output_dir)) is None:
+        return False
+    loaded = load(scene_path, settings)
+    resolved = with_scene_defaults(settings or RenderSettings(), loaded.output)
+    return key == content_key(loaded, resolved)
 
 
 def compare(
@@ -311,24 +364,14 @@ def compare(
         settings.check_method(method)
     scene_path, output_dir = Path(scene_path), Path(output_dir)
     prepared = prepare(load(scene_path, settings).scene, settings)
-    runs: list[MethodRun] = []
     try:
         if reference:
             ref = make_reference(reference, prepared)
         else:
             ref = automatic_reference(prepared.mesh, prepared.engine, settings.solve.tolerance)
-        runs = [run_method(prepared, settings.solve, method, ref) for method in methods]
+        runs, summary = compare_methods(prepared, settings.solve, methods, ref, str(scene_path))
     finally:
         prepared.close()
-    summary = {
-        "scene": str(scene_path),
-        "receivers": prepared.mesh.receiver_count,
-        "patches": prepared.mesh.patch_count,
-        "reference": {"kind": ref.kind, "description": ref.description},
-        "tolerance": settings.solve.tolerance,
-        "table": [run.row() for run in runs],
-        "logs": {run.method: run.log.as_dict() for run in runs},
-    }
     write_comparison(output_dir, summary, runs, str(scene_path))
     return summary
 
@@ -347,8 +390,11 @@ __all__ = [
     "comparison_table",
     "load",
     "make_reference",
+    "outputs_current",
     "prepare",
     "render",
+    "solve",
     "solve_scene",
     "verify_outputs",
+    "write",
 ]

@@ -27,6 +27,7 @@ LAYERS = (
     ("raytrad.settings",),
     ("raytrad.outputs",),
     ("raytrad.api",),
+    ("raytrad.batch",),
     ("raytrad.cli", "raytrad.__main__"),
 )
 
@@ -40,6 +41,7 @@ ADAPTERS = {
     "xatlas": "raytrad.products.atlas",
     "matplotlib": "raytrad.outputs.plot",
     "tqdm": "raytrad.cli",
+    "distributed": "raytrad.batch.dask",
 }
 
 #: Longest module [lines], and longest API module.
@@ -150,10 +152,10 @@ def test_products_write_nothing() -> None:
     assert writers == set()
 
 
-def test_the_cli_imports_only_the_api_and_the_settings() -> None:
+def test_the_cli_imports_only_the_api_the_batch_and_the_settings() -> None:
     # raytrad.cli and its own modules (the parser) import nothing else of the package
     cli = {name for name in MODULES if name == "raytrad.cli" or name.startswith("raytrad.cli.")}
-    allowed = {"raytrad", "raytrad.api", "raytrad.settings"} | cli
+    allowed = {"raytrad", "raytrad.api", "raytrad.batch", "raytrad.settings"} | cli
     for name in cli:
         assert _graph()[name] <= allowed, name
 
@@ -183,3 +185,14 @@ def test_modules_stay_small() -> None:
     lengths = {name: len(path.read_text().splitlines()) for name, path in MODULES.items()}
     assert {name: n for name, n in lengths.items() if n > MODULE_LIMIT} == {}
     assert lengths["raytrad.api"] <= API_LIMIT
+
+
+def test_importing_the_package_loads_nothing_until_a_name_is_used() -> None:
+    code = (
+        "import sys, raytrad\n"
+        "print(','.join(sorted(m for m in sys.modules if m.startswith('raytrad.'))))\n"
+        "raytrad.RenderSettings\n"
+        "print('raytrad.settings' in sys.modules, 'raytrad.api' in sys.modules)\n"
+    )
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert done.stdout.split("\n")[:2] == ["", "True False"]

@@ -14,18 +14,9 @@ from types import FrameType
 from typing import Any
 
 from raytrad import api
+from raytrad.cli.bake import run_bake
+from raytrad.cli.options import render_settings
 from raytrad.cli.parser import build_parser
-from raytrad.settings import (
-    Camera,
-    ImageSettings,
-    LightmapSettings,
-    MeshSettings,
-    RefineSettings,
-    RenderSettings,
-    SettingsError,
-    SolveSettings,
-    defaults,
-)
 
 log = logging.getLogger("raytrad")
 
@@ -105,99 +96,10 @@ class _StopFlag:
         )
 
 
-def _parse_camera(text: str, up: str = "y") -> Camera:
-    try:
-        parts = text.split(":")
-        position = tuple(float(v) for v in parts[0].split(","))
-        target = tuple(float(v) for v in parts[1].split(","))
-        fov = float(parts[2]) if len(parts) > 2 else defaults.vertical_fov_deg
-        if len(position) != 3 or len(target) != 3 or len(parts) > 3:
-            raise ValueError
-    except (ValueError, IndexError):
-        raise SettingsError(
-            f"--camera wants X,Y,Z:TX,TY,TZ[:FOV] (metres, degrees), got {text!r}"
-        ) from None
-    return Camera(
-        (position[0], position[1], position[2]),
-        (target[0], target[1], target[2]),
-        up=(0.0, 0.0, 1.0) if up == "z" else (0.0, 1.0, 0.0),
-        vertical_fov_deg=fov,
-    )
-
-
-def _uv_set(text: str) -> int | str:
-    """``--uv-set``: 'auto', 'atlas' or a set index >= 0."""
-    if text in ("auto", "atlas"):
-        return text
-    if text.isascii() and text.isdigit():
-        return int(text)
-    raise SettingsError(f"--uv-set wants auto, atlas or a UV set number >= 0, got {text!r}")
-
-
-def _output_settings(args: argparse.Namespace) -> dict[str, Any]:
-    """Lightmap, image and glTF settings from the options (None: the scene file's value)."""
-    out: dict[str, Any] = {
-        "gltf": args.gltf,
-        "exposure": args.exposure,
-        "refine": RefineSettings(threshold=args.refine_threshold, max_receivers=args.max_receivers),
-    }
-    if args.lightmap or (args.gltf and args.texel_density is not None):
-        out["lightmap"] = LightmapSettings(
-            resolution=args.lightmap_resolution,
-            texel_density=args.texel_density,
-            padding=args.lightmap_padding,
-            half=not args.lightmap_float,
-            uv_set=_uv_set(args.uv_set),
-            per_mesh=args.lightmap_per_mesh,
-        )
-    elif args.uv_set != "auto" or args.lightmap_per_mesh:
-        raise SettingsError("--uv-set and --lightmap-per-mesh need --lightmap")
-    if args.view is not None and not args.image:
-        raise SettingsError("--view needs --image")
-    if args.image:
-        out["image"] = ImageSettings(
-            width=args.width,
-            height=args.height,
-            samples=args.spp,
-            camera=None if args.camera is None else _parse_camera(args.camera, args.up),
-            view=args.view,
-            tonemap=args.tonemap,
-            up=args.up,
-        )
-    return out
-
-
-def _settings(args: argparse.Namespace, method: str) -> RenderSettings:
-    extra = _output_settings(args) if args.command == "render" else {}
-    return RenderSettings(
-        mesh=MeshSettings(
-            max_edge=args.max_edge,
-            receivers=args.receivers,
-            patch_size=args.patch_size,
-            patches=args.patches,
-            samples=args.samples,
-            emitter_samples=args.emitter_samples,
-            seed=args.seed,
-        ),
-        solve=SolveSettings(
-            method=method,
-            tolerance=args.tolerance,
-            time_limit=args.time_limit,
-            max_shots=args.max_shots,
-            omega=args.omega,
-        ),
-        scale=args.scale,
-        allow_outside_files=args.allow_outside_files,
-        cache_mb=args.cache_mb,
-        checkpoint_seconds=args.checkpoint_every,
-        **extra,
-    )
-
-
 def _compare(args: argparse.Namespace) -> int:
     methods = [m.strip() for m in args.methods.split(",") if m.strip()]
     summary = api.compare(
-        args.scene, args.output, methods, _settings(args, "ambient"), args.reference
+        args.scene, args.output, methods, render_settings(args, "ambient"), args.reference
     )
     if not args.quiet:
         ref = summary["reference"]
@@ -208,7 +110,7 @@ def _compare(args: argparse.Namespace) -> int:
 
 
 def _render(args: argparse.Namespace) -> int:
-    settings = _settings(args, args.method)
+    settings = render_settings(args, args.method)
     progress = _Progress(enabled=not args.quiet)
     stop = _StopFlag()
     previous = {signum: signal.signal(signum, stop.handler) for signum in _STOP_SIGNALS}
@@ -293,6 +195,11 @@ def _fmt(value: float) -> str:
     return f"{value:.2e}" if math.isfinite(value) else "none yet"
 
 
+def _subject(args: argparse.Namespace) -> Path:
+    """What a command works on: its scene, else its manifest."""
+    return Path(getattr(args, "scene", None) or args.manifest)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``raytrad`` console script; returns the exit status."""
     parser = build_parser()
@@ -307,6 +214,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             return _render(args)
         if args.command == "compare":
             return _compare(args)
+        if args.command == "bake":
+            return run_bake(args)
     except api.RaytradError as exc:
         print(f"raytrad: error: {exc}", file=sys.stderr)
         return 1
@@ -319,7 +228,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 130
     except MemoryError:
         print(
-            f"raytrad: error: {args.scene}: out of memory (lower --receivers or --cache-mb)",
+            f"raytrad: error: {_subject(args)}: out of memory (lower --receivers or --cache-mb)",
             file=sys.stderr,
         )
         return 1
@@ -327,7 +236,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         if args.verbose:
             raise
         print(
-            f"raytrad: error: {args.scene}: internal error ({type(exc).__name__}: "
+            f"raytrad: error: {_subject(args)}: internal error ({type(exc).__name__}: "
             f"{' '.join(str(exc).split())[:200]}); rerun with -v for the traceback and "
             "please report it",
             file=sys.stderr,

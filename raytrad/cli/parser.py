@@ -220,7 +220,79 @@ def build_parser() -> argparse.ArgumentParser:
         "interrupted run, or old and new files side by side).",
     )
     verify.add_argument("directory", type=Path, metavar="DIR")
+    _add_bake(sub)
     return parser
+
+
+def _add_bake(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    bake = sub.add_parser(
+        "bake",
+        help="render every job of a TOML manifest, on this machine or a Dask cluster",
+        description="Render the jobs of MANIFEST ([defaults] and [[job]] tables of render "
+        "options; scene and output paths relative to the manifest). Jobs whose outputs are "
+        "up to date are skipped, failed ones retried, and a summary is printed and written "
+        "to bake-summary.json beside the manifest. Exit 0 when every job is done or "
+        "skipped, 1 when one failed.",
+        epilog=_BAKE_EXAMPLE,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    bake.add_argument("manifest", type=Path, metavar="MANIFEST", help="the TOML manifest")
+    where = bake.add_mutually_exclusive_group()
+    where.add_argument(
+        "--workers",
+        type=int,
+        default=None,
+        metavar="N",
+        help="jobs at once on this machine, each in its own process (default: one per core; "
+        "the cores are shared out among them)",
+    )
+    where.add_argument(
+        "--local-cluster",
+        type=int,
+        default=None,
+        metavar="N",
+        help="run on a Dask LocalCluster of N workers (needs raytrad[distributed])",
+    )
+    where.add_argument(
+        "--scheduler",
+        default=None,
+        metavar="ADDRESS",
+        help="submit to a running Dask scheduler, e.g. tcp://host:8786 (needs "
+        "raytrad[distributed])",
+    )
+    bake.add_argument(
+        "--retries",
+        type=int,
+        default=2,
+        metavar="N",
+        help="further attempts for a job that failed in a way trying again can mend (a lost "
+        "worker, an internal error, a full disk); a broken scene is not retried "
+        "(default: %(default)s)",
+    )
+    bake.add_argument(
+        "--summary",
+        type=Path,
+        default=None,
+        metavar="PATH",
+        help="where to write the JSON summary (default: bake-summary.json beside MANIFEST)",
+    )
+    bake.add_argument("-q", "--quiet", action="store_true", help="print only errors")
+    bake.add_argument("-v", "--verbose", action="store_true", help="log details")
+
+
+_BAKE_EXAMPLE = """\
+example manifest:
+  [defaults]            # any render option, by its long name with _ for -
+  receivers = 20000
+  lightmap = true
+  [[job]]
+  scene = "levels/a.glb"   # relative to the manifest
+  output = "out/a"
+  [[job]]
+  scene = "levels/b.obj"
+  output = "out/b"
+  tolerance = 1e-4         # per-job override
+"""
 
 
 _UNITS = (

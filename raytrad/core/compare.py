@@ -77,3 +77,21 @@ def run_method(
         state.seconds,
         setup,
     )
+
+
+def compare_methods(
+    prepared: Prepared, settings: SolveSettings, methods: list[str], ref: Reference, scene: str
+) -> tuple[list[MethodRun], dict[str, Any]]:
+    """Run each of ``methods`` on ``prepared`` against ``ref``: the runs, and the summary
+    ``raytrad compare`` writes as compare.json (the table and every error log)."""
+    runs = [run_method(prepared, settings, method, ref) for method in methods]
+    summary = {
+        "scene": scene,
+        "receivers": prepared.mesh.receiver_count,
+        "patches": prepared.mesh.patch_count,
+        "reference": {"kind": ref.kind, "description": ref.description},
+        "tolerance": settings.tolerance,
+        "table": [run.row() for run in runs],
+        "logs": {run.method: run.log.as_dict() for run in runs},
+    }
+    return runs, summary

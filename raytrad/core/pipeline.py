@@ -108,6 +108,7 @@ def prepare(
     cache_mb: float = defaults.cache_mb,
     stop: Callable[[], bool] | None = None,
     columns: dict[str, np.ndarray] | None = None,
+    on_column: Callable[[RadiosityMesh, FormFactorEngine], None] | None = None,
 ) -> Prepared:
     """Repair, mesh and balance ``scene``: everything before the first shot.
 
@@ -127,6 +128,9 @@ def prepare(
     columns : dict or None
         Columns of an earlier pass cut short (:meth:`FormFactorEngine.pass_columns`, from
         a checkpoint): only the others are computed.
+    on_column : callable or None
+        ``on_column(mesh, engine)`` after each column the pass computes, in the calling
+        thread (to checkpoint a long pass).
 
     Raises
     ------
@@ -161,7 +165,14 @@ def prepare(
             log.info(
                 "form factors: %d columns from the checkpoint", engine.restore_columns(columns)
             )
-        balance = engine.balance(closed, _pass_progress(), stop=stop)
+        progress = _pass_progress()
+
+        def column_done(done: int, total: int) -> None:
+            progress(done, total)
+            if on_column is not None:
+                on_column(mesh, engine)
+
+        balance = engine.balance(closed, column_done, stop=stop)
     if balance["complete"]:
         log.info(
             "form factors: %d closed rows held to 1 (largest miss %.2e), %d patches held to "

@@ -18,7 +18,7 @@ from raytrad.core.gather import near_field_irradiance
 from raytrad.core.mesh import RadiosityMesh
 from raytrad.core.solver import SolveSettings, solve
 from raytrad.core.system import patch_average_matrix
-from raytrad.errors import SceneError
+from raytrad.errors import SceneError, SettingsError
 from raytrad.scene import triangle_areas_normals
 
 #: Largest patch count for which the dense matrices are built.
@@ -150,6 +150,37 @@ def reference_at_receivers(
     ):
         return np.asarray(radiosity, dtype=np.float64)
     return _nearest_facing(source, positions, triangles, radiosity, mesh)
+
+
+def named_reference(
+    spec: str, mesh: RadiosityMesh, engine: FormFactorEngine, can_occlude: bool
+) -> Reference:
+    """The reference ``dense`` (direct solve of the same discrete system) or ``analytic``
+    (B = E/(1-rho), closed convex enclosures of uniform materials).
+
+    Raises
+    ------
+    SettingsError
+        It does not apply to this scene (too many patches for a dense solve, something can
+        occlude, materials not uniform), or ``spec`` names neither.
+    """
+    if spec == "dense":
+        try:
+            radiosity = dense_solve(mesh, engine)
+        except ValueError as exc:
+            raise SettingsError(f"{exc}; use fewer patches or a previous result") from exc
+        return Reference(radiosity, "dense", "direct solve of the same discrete system")
+    if spec == "analytic":
+        if can_occlude:
+            raise SettingsError(
+                "the analytic reference B = E/(1-rho) needs a closed convex enclosure"
+            )
+        try:
+            radiosity = analytic_furnace(mesh)
+        except ValueError as exc:
+            raise SettingsError(str(exc)) from exc
+        return Reference(radiosity, "analytic", "closed enclosure: B = E / (1 - rho)")
+    raise SettingsError(f"unknown reference {spec!r}: dense, analytic or a result PLY")
 
 
 def automatic_reference(

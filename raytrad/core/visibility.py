@@ -26,12 +26,22 @@ RAY_CHUNK = 1 << 16
 _MISS, _FRONT, _BACK = 0, 1, 2
 
 
+#: Environment variable capping the threads of one render (``raytrad bake`` sets it in
+#: each job's process so that jobs running side by side share the cores).
+THREADS_VARIABLE = "RAYTRAD_THREADS"
+
+
 def worker_count() -> int:
-    """Threads for ray batches: every core the process may use."""
+    """Threads for ray batches and the form-factor pass: every core the process may use,
+    or fewer when :data:`THREADS_VARIABLE` holds a whole number >= 1."""
     try:
-        return max(1, len(os.sched_getaffinity(0)))
+        cores = max(1, len(os.sched_getaffinity(0)))
     except AttributeError:  # pragma: no cover - not Linux
-        return max(1, os.cpu_count() or 1)
+        cores = max(1, os.cpu_count() or 1)
+    text = os.environ.get(THREADS_VARIABLE, "").strip()
+    if text.isascii() and text.isdigit() and int(text) >= 1:
+        return min(cores, int(text))
+    return cores
 
 
 class Occluder:

@@ -1,5 +1,6 @@
 """What a running render reports after each shot, and the solver hook that reports it
-(logging the error estimate, extrapolating the time left, checkpointing periodically)."""
+(logging the error estimate, extrapolating the time left, checkpointing periodically);
+the form-factor pass's hook that checkpoints a long pass."""
 
 from __future__ import annotations
 
@@ -8,7 +9,9 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 from raytrad.core.convergence import ConvergenceMonitor, ResidualTrend
-from raytrad.core.solver import SolverState
+from raytrad.core.formfactor import FormFactorEngine
+from raytrad.core.mesh import RadiosityMesh
+from raytrad.core.solver import SolverState, new_state
 from raytrad.settings import RenderSettings
 
 
@@ -62,3 +65,19 @@ def shot_hook(
             last_save[0] = time.perf_counter()
 
     return on_shot
+
+
+def pass_hook(
+    save: Callable[[SolverState, FormFactorEngine], None], seconds: float
+) -> Callable[[RadiosityMesh, FormFactorEngine], None]:
+    """The form-factor pass's per-column hook: every ``seconds``, ``save`` the state before
+    any shot with the engine (whose columns so far go into the checkpoint), so that a run
+    killed during a long pass resumes it instead of starting over."""
+    last_save = [time.perf_counter()]
+
+    def on_column(mesh: RadiosityMesh, engine: FormFactorEngine) -> None:
+        if time.perf_counter() - last_save[0] >= seconds:
+            save(new_state(mesh), engine)
+            last_save[0] = time.perf_counter()
+
+    return on_column

@@ -58,10 +58,13 @@ def save_state(
 
 
 def resume_point(
-    path: Path, key: dict[str, Any]
+    path: Path, key: dict[str, Any], strict: bool = True
 ) -> tuple[SolverState | None, dict[str, np.ndarray] | None]:
     """What ``--resume`` continues from: the saved solver state and the columns of a
     form-factor pass cut short ((None, None) without a checkpoint).
+
+    With ``strict`` False (batch jobs), a checkpoint that does not match or cannot be read
+    is passed over with a warning, and the run starts afresh.
 
     A state saved while the pass was incomplete is dropped (None): its shots went through
     factors not yet balanced, so the solve starts again once the pass is done (those were
@@ -70,12 +73,18 @@ def resume_point(
     Raises
     ------
     RaytradError
-        As :func:`load_state`.
+        As :func:`load_state`, when ``strict``.
     """
     if not Path(path).exists():
         return None, None
-    state = load_state(path, key)
-    columns = load_pass_columns(path)
+    try:
+        state = load_state(path, key)
+        columns = load_pass_columns(path)
+    except RaytradError as exc:
+        if strict:
+            raise
+        log.warning("%s; starting afresh", exc)
+        return None, None
     if columns:
         log.info("resuming the form-factor pass from %s: %d columns", path, len(columns["patch"]))
         return None, columns

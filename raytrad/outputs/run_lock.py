@@ -5,7 +5,8 @@ checkpoint. A render holds ``<output_dir>/raytrad.lock`` (created exclusively, h
 its process id and host) from before it reads a checkpoint until it has written its
 manifest. A second render into the folder is refused, naming the first, while that
 process lives; a lock left by a process that is gone (killed with ``kill -9``, say) is
-taken over with a warning.
+taken over with a warning. A holder on another host (a Dask cluster sharing the folder)
+counts as gone once its lock has not been touched for :data:`STALE_SECONDS`.
 """
 
 from __future__ import annotations
@@ -14,6 +15,8 @@ import json
 import logging
 import os
 import socket
+import threading
+import time
 from pathlib import Path
 from types import TracebackType
 
@@ -22,6 +25,10 @@ from raytrad.errors import SettingsError
 log = logging.getLogger(__name__)
 
 LOCK = "raytrad.lock"
+#: Seconds between a holder's touches of its lock.
+HEARTBEAT_SECONDS = 30.0
+#: Seconds without a touch after which a lock held on another host counts as gone.
+STALE_SECONDS = 120.0
 
 
 def _alive(pid: int) -> bool:
@@ -34,15 +41,32 @@ def _alive(pid: int) -> bool:
     return True
 
 
+class FolderLocked(SettingsError):
+    """Another run holds the folder's lock.
+
+    Attributes
+    ----------
+    elsewhere : bool
+        The holder runs on another host, so whether it lives is known only from its
+        heartbeat; its lock goes stale :data:`STALE_SECONDS` after the last one.
+    """
+
+    def __init__(self, message: str, elsewhere: bool) -> None:
+        super().__init__(message)
+        self.elsewhere = elsewhere
+
+
 class RunLock:
     """Context manager holding an output folder's lock (see the module docstring).
 
     The folder is created if missing, and removed again on release when the run left it
-    empty (a run that failed before writing anything).
+    empty (a run that failed before writing anything). While held, a daemon thread touches
+    the lock every :data:`HEARTBEAT_SECONDS`, so that runs on other hosts sharing the
+    folder (a Dask cluster) can tell a live holder from a lost one.
 
     Raises
     ------
-    SettingsError
+    FolderLocked
         Another live process holds the lock.
     """
 
@@ -50,6 +74,7 @@ class RunLock:
         self.directory = Path(output_dir)
         self.path = self.directory / LOCK
         self.created = False
+        self._stop_heartbeat = threading.Event()
 
     def __enter__(self) -> RunLock:
         self.created = not self.directory.exists()
@@ -63,22 +88,34 @@ class RunLock:
                 continue
             with os.fdopen(fd, "w") as handle:
                 json.dump({"pid": os.getpid(), "host": host}, handle)
+            threading.Thread(target=self._heartbeat, name="raytrad-lock", daemon=True).start()
             return self
         raise SettingsError(f"{self.directory}: could not take the lock {self.path}")
 
+    def _heartbeat(self) -> None:
+        while not self._stop_heartbeat.wait(HEARTBEAT_SECONDS):
+            try:
+                os.utime(self.path)
+            except OSError:  # removed under us: nothing left to keep alive
+                return
+
     def _clear_stale(self, host: str) -> None:
-        """Remove a lock whose process is gone; refuse one whose process lives."""
+        """Remove a lock whose process is gone; refuse one whose process lives. On another
+        host, a lock whose heartbeat stopped :data:`STALE_SECONDS` ago counts as gone."""
         try:
             holder = json.loads(self.path.read_text())
             pid, holder_host = int(holder["pid"]), str(holder["host"])
+            quiet = time.time() - self.path.stat().st_mtime
         except (OSError, ValueError, KeyError, TypeError):
-            pid, holder_host = -1, host  # unreadable: a writer died mid-write
-        if holder_host != host or (pid > 0 and _alive(pid)):
-            where = f"pid {pid}" + ("" if holder_host == host else f" on {holder_host}")
-            raise SettingsError(
+            pid, holder_host, quiet = -1, host, 0.0  # unreadable: a writer died mid-write
+        elsewhere = holder_host != host
+        if (elsewhere and quiet < STALE_SECONDS) or (not elsewhere and pid > 0 and _alive(pid)):
+            where = f"pid {pid}" + (f" on {holder_host}" if elsewhere else "")
+            raise FolderLocked(
                 f"{self.directory}: another raytrad run ({where}) is writing to this folder; "
                 f"wait for it, choose another output folder, or remove {self.path} if that "
-                "run is gone"
+                "run is gone",
+                elsewhere,
             )
         log.warning("%s: taking over the lock of a run that is gone (pid %d)", self.path, pid)
         self.path.unlink(missing_ok=True)
@@ -89,6 +126,7 @@ class RunLock:
         error: BaseException | None,
         trace: TracebackType | None,
     ) -> None:
+        self._stop_heartbeat.set()
         self.path.unlink(missing_ok=True)
         if self.created and not any(self.directory.iterdir()):
             self.directory.rmdir()

@@ -10,14 +10,20 @@ no manifest, a listed file missing, or a file whose hash differs.
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import json
+import os
 import time
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from raytrad import __version__
 from raytrad.formats.atomic import atomic_write
+from raytrad.scenefiles import SceneFile
+from raytrad.settings import RenderSettings
 
 MANIFEST = "raytrad-run.json"
 
@@ -35,7 +41,37 @@ def _sha256(path: Path) -> str:
     return digest.hexdigest()
 
 
-def write_manifest(output_dir: Path, outputs: dict[str, Path], report: dict[str, Any]) -> Path:
+def content_key(loaded: SceneFile, settings: RenderSettings) -> str:
+    """SHA-256 of what a render's outputs are made from: the loaded scene (geometry,
+    materials, names, lightmap UVs, cameras, output defaults), the resolved settings and
+    the raytrad version.
+
+    ``raytrad bake`` skips a job whose folder verifies and whose manifest holds this key.
+    Settings that do not change the outputs (the cache size, the checkpoint interval) are
+    left out.
+    """
+    digest = hashlib.sha256(f"raytrad {__version__}\n".encode())
+    scene = loaded.scene
+    for item in dataclasses.fields(scene):
+        value = getattr(scene, item.name)
+        if isinstance(value, np.ndarray):
+            digest.update(f"{item.name} {value.dtype} {value.shape}\n".encode())
+            digest.update(np.ascontiguousarray(value).tobytes())
+        elif item.name != "source":  # the same content read from elsewhere is the same
+            digest.update(f"{item.name} {value!r}\n".encode())
+    fixed = dataclasses.replace(settings, cache_mb=0.0, checkpoint_seconds=1.0)
+    described = {
+        "settings": dataclasses.asdict(fixed),
+        "cameras": [repr(camera) for camera in loaded.cameras],
+        "output": loaded.output,
+    }
+    digest.update(json.dumps(described, sort_keys=True, default=repr).encode())
+    return digest.hexdigest()
+
+
+def write_manifest(
+    output_dir: Path, outputs: dict[str, Path], report: dict[str, Any], key: str | None = None
+) -> Path:
     """Write the manifest (atomically, last) listing every output file of the run.
 
     Parameters
@@ -45,6 +81,8 @@ def write_manifest(output_dir: Path, outputs: dict[str, Path], report: dict[str,
         The run's files by key (``ply``, ``report``, ``lightmap``...), all in ``output_dir``.
     report : dict
         The run's report, for the scene and the stop reason.
+    key : str or None
+        The run's :func:`content_key`.
 
     Returns
     -------
@@ -61,6 +99,7 @@ def write_manifest(output_dir: Path, outputs: dict[str, Path], report: dict[str,
         "written": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
         "scene": report.get("scene"),
         "stop_reason": report.get("solve", {}).get("stop_reason"),
+        "content_key": key,
         "files": files,
     }
     path = output_dir / MANIFEST
@@ -69,7 +108,28 @@ def write_manifest(output_dir: Path, outputs: dict[str, Path], report: dict[str,
     return path
 
 
-def verify_outputs(directory: str | Path) -> list[str]:
+def read_manifest(directory: str | os.PathLike[str]) -> dict[str, Any] | None:
+    """The folder's manifest as written, or None when it has none or it is unreadable."""
+    try:
+        manifest = json.loads((Path(directory) / MANIFEST).read_text())
+    except (OSError, ValueError):
+        return None
+    return manifest if isinstance(manifest, dict) else None
+
+
+def complete_set_key(directory: str | os.PathLike[str]) -> str | None:
+    """The :func:`content_key` of the set in ``directory`` when the set verifies and its
+    run was not interrupted; None otherwise."""
+    manifest = read_manifest(directory)
+    if manifest is None or manifest.get("stop_reason") == "interrupted":
+        return None
+    if verify_outputs(directory):
+        return None
+    key = manifest.get("content_key")
+    return key if isinstance(key, str) else None
+
+
+def verify_outputs(directory: str | os.PathLike[str]) -> list[str]:
     """What is wrong with the output set in ``directory``; empty when it is complete and
     consistent (every file the manifest lists is there with its size and hash).
 

@@ -9,6 +9,7 @@ import os
 import socket
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import pytest
@@ -16,7 +17,7 @@ import pytest
 from raytrad import api
 from raytrad.core.mesh import MeshSettings
 from raytrad.errors import SettingsError
-from raytrad.outputs.run_lock import LOCK, RunLock
+from raytrad.outputs.run_lock import LOCK, STALE_SECONDS, FolderLocked, RunLock
 from raytrad.settings import RenderSettings
 from tests.conftest import SCENES
 
@@ -61,3 +62,51 @@ def test_the_lock_is_released_and_an_empty_new_folder_removed(tmp_path: Path) ->
     with RunLock(out):
         (out / "kept.txt").write_text("written")
     assert sorted(p.name for p in out.iterdir()) == ["kept.txt"]
+
+
+def _hold_elsewhere(directory: Path, seconds_ago: float) -> None:
+    """A lock held on another host, last touched ``seconds_ago``."""
+    directory.mkdir(parents=True, exist_ok=True)
+    path = directory / LOCK
+    path.write_text(json.dumps({"pid": 1, "host": "render-node-7.invalid"}))
+    touched = time.time() - seconds_ago
+    os.utime(path, (touched, touched))
+
+
+def test_a_lock_on_another_host_is_stale_only_when_its_heartbeat_stops(tmp_path: Path) -> None:
+    _hold_elsewhere(tmp_path / "fresh", seconds_ago=5)
+    with pytest.raises(FolderLocked, match=r"pid 1 on render-node-7\.invalid") as caught:
+        RunLock(tmp_path / "fresh").__enter__()
+    assert caught.value.elsewhere
+
+    _hold_elsewhere(tmp_path / "silent", seconds_ago=STALE_SECONDS + 1)
+    with RunLock(tmp_path / "silent") as lock:
+        assert json.loads(lock.path.read_text())["host"] == socket.gethostname()
+
+
+def test_the_holder_touches_its_lock(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr("raytrad.outputs.run_lock.HEARTBEAT_SECONDS", 0.05)
+    with RunLock(tmp_path) as lock:
+        old = time.time() - 1000
+        os.utime(lock.path, (old, old))
+        time.sleep(0.5)
+        assert time.time() - lock.path.stat().st_mtime < 10
+    assert not lock.path.exists()
+
+
+def test_a_bake_job_waits_out_a_lost_workers_lock_elsewhere(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A task rescheduled after its worker died on another host finds that host's lock:
+    it waits until the heartbeat has been silent long enough, then renders."""
+    from raytrad.batch import Job, run_job
+
+    monkeypatch.setattr("raytrad.outputs.run_lock.STALE_SECONDS", 1.0)
+    monkeypatch.setattr("raytrad.batch.jobs.STALE_SECONDS", 1.0)
+    monkeypatch.setattr("raytrad.batch.jobs.LOCK_POLL_SECONDS", 0.3)
+    _hold_elsewhere(tmp_path / "out", seconds_ago=0)
+    start = time.monotonic()
+    result = run_job(Job("furnace", SCENES / "furnace.obj", tmp_path / "out", SETTINGS))
+    assert result.status == "done", result.message
+    assert time.monotonic() - start >= 1.0
+    assert api.verify_outputs(tmp_path / "out") == []

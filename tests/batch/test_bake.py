@@ -1,0 +1,211 @@
+"""``raytrad bake`` on the local process pool: per-job failures, skipping by content,
+retries of a killed worker, and a bake stopped by SIGTERM that resumes."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from raytrad import api
+from raytrad.batch import Job, JobResult, LocalPool, bake
+from raytrad.core.mesh import MeshSettings
+from raytrad.core.solver import SolveSettings
+from raytrad.formats.ply import read_radiosity_ply
+from raytrad.scene.builtin import cornell_box, furnace_box
+from raytrad.scenefiles import write_obj
+from raytrad.settings import RenderSettings
+from tests.conftest import run_cli
+
+POSIX = pytest.mark.skipif(sys.platform == "win32", reason="POSIX signals")
+#: Small jobs: a couple of seconds each on one core.
+SMALL = RenderSettings(mesh=MeshSettings(receivers=800, patches=60))
+
+
+def _scenes(folder: Path) -> None:
+    folder.mkdir(parents=True, exist_ok=True)
+    write_obj(cornell_box(), folder / "cornell.obj")
+    write_obj(furnace_box(reflectance=0.5), folder / "furnace.obj")
+
+
+def _manifest(folder: Path, extra: str = "", defaults: str = "", receivers: int = 800) -> Path:
+    path = folder / "bake.toml"
+    path.write_text(
+        f"[defaults]\nreceivers = {receivers}\npatches = 60\n{defaults}\n"
+        '[[job]]\nscene = "cornell.obj"\noutput = "out/cornell"\n'
+        '[[job]]\nscene = "furnace.obj"\noutput = "out/furnace"\n' + extra
+    )
+    return path
+
+
+def _summary(folder: Path) -> dict[str, dict]:
+    record = json.loads((folder / "bake-summary.json").read_text())
+    return {job["name"]: job for job in record["jobs"]}
+
+
+def test_a_missing_scene_fails_alone_and_a_rerun_skips_the_rest(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    _scenes(tmp_path)
+    manifest = _manifest(tmp_path, '[[job]]\nscene = "gone.obj"\noutput = "out/gone"\n')
+    status, out, err = run_cli(["bake", str(manifest)], capsys)
+    assert status == 1
+    jobs = _summary(tmp_path)
+    assert [jobs[n]["status"] for n in ("out/cornell", "out/furnace", "out/gone")] == [
+        "done",
+        "done",
+        "failed",
+    ]
+    gone = jobs["out/gone"]
+    assert gone["attempts"] == 1  # a missing file is not retried
+    assert gone["message"] == f"{tmp_path / 'gone.obj'}: file not found"
+    assert f"out/gone: failed in 0.0 s: {tmp_path / 'gone.obj'}: file not found" in err
+    assert not (tmp_path / "out/gone").exists()
+    assert "1 failed" in out and "2 done" in out
+
+    # each job's outputs are those of a render of its own, bit for bit
+    for name in ("cornell", "furnace"):
+        assert api.verify_outputs(tmp_path / "out" / name) == []
+        alone = api.render(tmp_path / f"{name}.obj", tmp_path / "alone" / name, SMALL)
+        _, _, baked = read_radiosity_ply(tmp_path / "out" / name / f"{name}.ply")
+        np.testing.assert_array_equal(baked, alone.result.radiosity.astype(np.float32))
+        assert jobs[f"out/{name}"]["error"] == pytest.approx(
+            max(alone.report["error"]["total_rms"])
+        )
+
+    # a rerun skips what is up to date; a changed scene or option renders again
+    status, _, _ = run_cli(["bake", str(manifest), "-q"], capsys)
+    assert status == 1
+    jobs = _summary(tmp_path)
+    assert jobs["out/cornell"]["status"] == jobs["out/furnace"]["status"] == "skipped"
+    write_obj(furnace_box(reflectance=0.6), tmp_path / "furnace.obj")
+    _manifest(tmp_path, "", defaults="tolerance = 1e-3")
+    status, _, _ = run_cli(["bake", str(manifest), "--summary", str(tmp_path / "s.json")], capsys)
+    assert status == 0
+    record = json.loads((tmp_path / "s.json").read_text())
+    assert [job["status"] for job in record["jobs"]] == ["skipped", "done"]
+    assert record["counts"]["skipped"] == 1 and record["counts"]["done"] == 1
+
+
+def test_options_that_change_the_outputs_render_again(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    _scenes(tmp_path)
+    manifest = _manifest(tmp_path)
+    assert run_cli(["bake", str(manifest), "-q"], capsys)[0] == 0
+    _manifest(tmp_path, defaults="tolerance = 1e-2")
+    assert run_cli(["bake", str(manifest), "-q"], capsys)[0] == 0
+    assert {job["status"] for job in _summary(tmp_path).values()} == {"done"}
+    _manifest(tmp_path, defaults="tolerance = 1e-2\ncheckpoint_every = 7")  # no effect
+    assert run_cli(["bake", str(manifest), "-q"], capsys)[0] == 0
+    assert {job["status"] for job in _summary(tmp_path).values()} == {"skipped"}
+
+
+class _FlakyRunner:
+    """Runs jobs in this process; the first attempt of ``flaky`` is lost, as when its
+    worker process is killed."""
+
+    description = "test"
+    slots = 2
+
+    def __init__(self, flaky: str) -> None:
+        self.flaky, self.lost, self.pending = flaky, False, []
+
+    def submit(self, job: Job) -> Job:
+        self.pending.append(job)
+        return job
+
+    def wait(self, handles):  # type: ignore[no-untyped-def]
+        job = self.pending.pop(0)
+        if job.name == self.flaky and not self.lost:
+            self.lost = True
+            return [(job, ConnectionError("worker gone"))]
+        return [(job, JobResult(job.name, "done"))]
+
+    def interrupt(self) -> None: ...
+
+    def close(self) -> None: ...
+
+
+def test_the_driver_retries_lost_jobs_a_bounded_number_of_times(tmp_path: Path) -> None:
+    jobs = [Job(n, tmp_path / f"{n}.obj", tmp_path / n) for n in ("a", "b")]
+    results = bake(jobs, _FlakyRunner("b"), retries=2)
+    assert [(r.name, r.status, r.attempts) for r in results] == [("a", "done", 1), ("b", "done", 2)]
+    results = bake(jobs, _FlakyRunner("b"), retries=0)
+    assert results[1].status == "failed" and "worker lost (ConnectionError" in results[1].message
+
+
+def _wait_for_lock(folder: Path, process: subprocess.Popen[bytes], seconds: float = 120) -> int:
+    """The pid of the process holding ``folder``'s lock, once it has one."""
+    end = time.monotonic() + seconds
+    while time.monotonic() < end:
+        if process.poll() is not None:
+            raise AssertionError(f"the bake ended first: {process.communicate()[1].decode()}")
+        try:
+            return int(json.loads((folder / "raytrad.lock").read_text())["pid"])
+        except (OSError, ValueError, KeyError):
+            time.sleep(0.05)
+    raise AssertionError(f"no job started in {folder}")
+
+
+@POSIX
+def test_a_killed_pool_worker_is_retried_and_a_sigterm_bake_resumes(tmp_path: Path) -> None:
+    """kill -9 of a job's process: the job is retried and completes. SIGTERM to the bake:
+    running jobs save checkpoints, the bake exits 143, and the next bake resumes them to
+    the uninterrupted answer."""
+    _scenes(tmp_path)
+    manifest = _manifest(tmp_path, defaults="checkpoint_every = 0.2", receivers=3000)
+    argv = [sys.executable, "-m", "raytrad", "bake", str(manifest), "--workers", "1"]
+    bake_process = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    worker = _wait_for_lock(tmp_path / "out/cornell", bake_process)
+    time.sleep(1.0)
+    os.kill(worker, signal.SIGKILL)
+    _, err = bake_process.communicate(timeout=600)
+    assert bake_process.returncode == 0, err.decode()
+    jobs = _summary(tmp_path)
+    assert jobs["out/cornell"]["status"] == "done" and jobs["out/cornell"]["attempts"] == 2
+    assert "worker lost" in err.decode() and "trying again" in err.decode()
+    assert all(api.verify_outputs(tmp_path / "out" / n) == [] for n in ("cornell", "furnace"))
+
+    # SIGTERM mid-job: a checkpoint, exit 143; the next bake resumes it
+    _manifest(tmp_path, defaults="checkpoint_every = 0.2\ntolerance = 1e-5", receivers=3000)
+    bake_process = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    _wait_for_lock(tmp_path / "out/cornell", bake_process)
+    time.sleep(2.0)
+    bake_process.send_signal(signal.SIGTERM)
+    _, err = bake_process.communicate(timeout=600)
+    assert bake_process.returncode == 128 + signal.SIGTERM, err.decode()
+    jobs = _summary(tmp_path)
+    assert jobs["out/cornell"]["status"] == "interrupted"
+    assert jobs["out/furnace"]["status"] == "not run"
+    assert (tmp_path / "out/cornell/cornell.checkpoint.npz").is_file()
+
+    done = subprocess.run([*argv[:-2], "-q"], capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, done.stderr
+    jobs = _summary(tmp_path)
+    assert jobs["out/cornell"]["status"] == "done" and jobs["out/cornell"]["resumed"]
+    straight = api.render(
+        tmp_path / "cornell.obj",
+        tmp_path / "straight",
+        RenderSettings(
+            mesh=MeshSettings(receivers=3000, patches=60), solve=SolveSettings(tolerance=1e-5)
+        ),
+    )
+    _, _, baked = read_radiosity_ply(tmp_path / "out/cornell/cornell.ply")
+    np.testing.assert_array_equal(baked, straight.result.radiosity.astype(np.float32))
+
+
+def test_a_local_pool_shares_the_cores(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr("raytrad.batch.pool.worker_count", lambda: 8)
+    assert (LocalPool(None, 3).slots, LocalPool(None, 3).threads) == (3, 2)
+    assert (LocalPool(None, 20).slots, LocalPool(None, 20).threads) == (8, 1)
+    assert (LocalPool(2, 20).slots, LocalPool(2, 20).threads) == (2, 4)
+    with pytest.raises(ValueError, match="workers must be >= 1"):
+        LocalPool(0, 3)
