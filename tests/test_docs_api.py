@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import re
 import shutil
+import tempfile
 from pathlib import Path
 
 import pytest
@@ -26,6 +27,7 @@ def test_the_api_page_examples_run(
     monkeypatch.chdir(tmp_path)
     blocks = _blocks()
     assert len(blocks) >= 5
+    before = set(Path(tempfile.gettempdir()).glob("raytrad-job-*"))
     namespace: dict[str, object] = {"__name__": "docs_api"}
     for number, block in enumerate(blocks, start=1):
         try:
@@ -37,6 +39,7 @@ def test_the_api_page_examples_run(
     assert (tmp_path / "out/baked/box.glb").is_file()
     assert (tmp_path / "out/baked/box.lightmap.exr").is_file()
     assert not (tmp_path / "out/vertex/box.lightmap.exr").exists()
+    assert set(Path(tempfile.gettempdir()).glob("raytrad-job-*")) == before  # none left
 
 
 def test_every_public_name_resolves_and_is_documented() -> None:

@@ -144,3 +144,9 @@ class DaskRunner:
         self.client.close()
         if self._cluster is not None:
             self._cluster.close()
+
+    def __enter__(self) -> DaskRunner:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()

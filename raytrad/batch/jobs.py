@@ -21,7 +21,7 @@ from typing import Any
 
 from raytrad import api
 from raytrad.core.visibility import THREADS_VARIABLE
-from raytrad.outputs.run_lock import HEARTBEAT_SECONDS, STALE_SECONDS, FolderLocked
+from raytrad.outputs.run_lock import HEARTBEAT_SECONDS, LOCK, STALE_SECONDS, FolderLocked
 from raytrad.outputs.run_manifest import MANIFEST, read_manifest
 from raytrad.settings import RenderSettings
 
@@ -86,6 +86,9 @@ class JobResult:
         Whether trying again could help (False for faults of the input).
     resumed : bool
         The last attempt continued from a checkpoint.
+    recovered : bool
+        The last attempt found the folder's lock of a run that was lost (a killed worker,
+        its task started again here) and took the folder over.
     """
 
     name: str
@@ -98,6 +101,7 @@ class JobResult:
     message: str = ""
     retry: bool = False
     resumed: bool = False
+    recovered: bool = False
 
     def as_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -163,6 +167,7 @@ def run_job(job: Job, threads: int | None = None) -> JobResult:
         if api.outputs_current(job.scene, job.output, job.settings):
             return result("skipped", **_previous(job.output))
         resumed = any(Path(job.output).glob("*.checkpoint.npz"))
+        recovered = (Path(job.output) / LOCK).exists()
         outcome = _render(job)
     except api.RaytradError as exc:
         return result("failed", message=str(exc), retry=False)
@@ -186,6 +191,7 @@ def run_job(job: Job, threads: int | None = None) -> JobResult:
         stop_reason=stop_reason,
         outputs=sorted(p.name for p in outcome.outputs.values()),
         resumed=resumed,
+        recovered=recovered,
     )
 
 

@@ -49,12 +49,15 @@ class JobSpec:
     options : dict of str to bool, int, float or str
         ``[defaults]`` overridden by the job's own options, by option name (``_`` for
         ``-``; the manifest may spell them either way).
+    own : frozenset of str
+        The options the job sets itself (the others come from ``[defaults]``).
     """
 
     name: str
     scene: Path
     output: Path
     options: dict[str, bool | int | float | str] = field(default_factory=dict)
+    own: frozenset[str] = frozenset()
 
 
 def read_manifest(path: str | Path) -> list[JobSpec]:
@@ -125,6 +128,7 @@ def _job(path: Path, number: int, job: dict[str, Any], defaults: dict[str, Any])
         scene=folder / Path(job["scene"]).expanduser(),
         output=folder / Path(job["output"]).expanduser(),
         options={**defaults, **options},
+        own=frozenset(options),
     )
 
 

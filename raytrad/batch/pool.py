@@ -1,7 +1,8 @@
 """The default runner: jobs in processes on this machine, each in a fresh process.
 
 Each job runs in its own ``python -m raytrad.batch.worker`` process, which reads the job
-from a file and writes its result to another. A crash or ``kill -9`` of one job's process
+from a file and writes its result to another, in a temporary folder of the job's own that
+is removed when the job ends. A crash or ``kill -9`` of one job's process
 loses only that job (the driver retries it), memory a render held goes back to the
 system, and the caller's own script is never imported again in the children (as
 ``multiprocessing``'s spawn would, which breaks scripts without a ``__main__`` guard). The
@@ -38,7 +39,7 @@ class WorkerLost(RuntimeError):
 @dataclass(eq=False)
 class _Running:
     process: subprocess.Popen[bytes]
-    result_path: Path
+    folder: Path  # the job's pickle and result, removed when the job ends
 
 
 class LocalPool:
@@ -67,24 +68,19 @@ class LocalPool:
             f"local pool: {self.slots} process{'es' if self.slots > 1 else ''}, "
             f"{self.threads} thread{'s' if self.threads > 1 else ''} each"
         )
-        self._folder: Path | None = None
         self._running: set[_Running] = set()
-        self._count = 0
 
     def submit(self, job: Job) -> _Running:
-        if self._folder is None:
-            self._folder = Path(tempfile.mkdtemp(prefix="raytrad-bake-"))
-        self._count += 1
-        job_path = self._folder / f"job-{self._count}.pickle"
+        folder = Path(tempfile.mkdtemp(prefix="raytrad-job-"))
+        job_path, result_path = folder / "job.pickle", folder / "result.pickle"
         job_path.write_bytes(pickle.dumps(job))
-        result_path = self._folder / f"result-{self._count}.pickle"
         environment = {**os.environ, THREADS_VARIABLE: str(self.threads)}
         process = subprocess.Popen(
             [sys.executable, "-m", "raytrad.batch.worker", str(job_path), str(result_path)],
             env=environment,
             stdin=subprocess.DEVNULL,
         )
-        running = _Running(process, result_path)
+        running = _Running(process, folder)
         self._running.add(running)
         return running
 
@@ -101,8 +97,12 @@ class LocalPool:
         self._running.discard(handle)
         code = handle.process.returncode
         try:
-            result = pickle.loads(handle.result_path.read_bytes())
+            result = pickle.loads((handle.folder / "result.pickle").read_bytes())
         except (OSError, pickle.UnpicklingError, EOFError):
+            result = None
+        finally:
+            shutil.rmtree(handle.folder, ignore_errors=True)
+        if result is None:
             how = f"killed by signal {-code}" if code < 0 else f"exit status {code}"
             return WorkerLost(f"the job's process ended without a result ({how})")
         return result if isinstance(result, JobResult) else WorkerLost("unreadable result")
@@ -121,7 +121,11 @@ class LocalPool:
                 handle.process.wait(timeout=60)
             except subprocess.TimeoutExpired:
                 handle.process.kill()
+            shutil.rmtree(handle.folder, ignore_errors=True)
         self._running.clear()
-        if self._folder is not None:
-            shutil.rmtree(self._folder, ignore_errors=True)
-            self._folder = None
+
+    def __enter__(self) -> LocalPool:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()

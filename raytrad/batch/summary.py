@@ -56,7 +56,11 @@ def summary_table(record: dict[str, Any]) -> str:
         if folder.is_relative_to(base):
             folder = folder.relative_to(base)
         outputs = f"{len(job['outputs'])} files in {folder}" if job["outputs"] else "-"
-        status = job["status"] + (" (resumed)" if job["resumed"] else "")
+        status = job["status"]
+        if job["resumed"]:
+            status += " (resumed)"
+        elif job["recovered"]:
+            status += " (after a lost run)"
         rows.append(
             (job["name"], status, str(job["attempts"]), f"{job['seconds']:.1f}", error, outputs)
         )

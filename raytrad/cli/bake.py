@@ -66,10 +66,10 @@ def job_from_spec(spec: JobSpec, manifest: Path, render: argparse.ArgumentParser
         One line naming the manifest, the job and the option: an unknown option (with the
         nearest known one), one a manifest cannot set, or a value the option refuses.
     """
-    where = f"{manifest}: job {spec.name!r}"
     names = _option_names(render)
     argv = [str(spec.scene), "--output", str(spec.output)]
     for key, value in spec.options.items():
+        where = f"{manifest}: job {spec.name!r}" if key in spec.own else f"{manifest}: [defaults]"
         if key in NOT_IN_MANIFEST:
             raise SettingsError(f"{where}: {key!r} cannot be set in a manifest")
         if key not in names:
@@ -92,7 +92,7 @@ def job_from_spec(spec: JobSpec, manifest: Path, render: argparse.ArgumentParser
         args.command = "render"
         settings = render_settings(args, args.method)
     except SettingsError as exc:
-        raise SettingsError(f"{where}: {exc}") from None
+        raise SettingsError(f"{manifest}: job {spec.name!r}: {exc}") from None
     return Job(spec.name, spec.scene, spec.output, settings, plot=args.plot)
 
 
@@ -159,7 +159,7 @@ def run_bake(args: argparse.Namespace) -> int:
             signal.signal(signum, handler)
         runner.close()
     record = summary_record(
-        manifest, jobs, results, runner.description, time.perf_counter() - start
+        manifest.resolve(), jobs, results, runner.description, time.perf_counter() - start
     )
     write_summary(summary_path, record)
     if not args.quiet:

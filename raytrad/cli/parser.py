@@ -216,8 +216,9 @@ def build_parser() -> argparse.ArgumentParser:
         "verify",
         help="check that an output folder holds one complete, consistent run",
         description="Check DIR against its raytrad-run.json: every output the last run "
-        "listed is there, unchanged. Exit 0 when complete and consistent, 1 otherwise (an "
-        "interrupted run, or old and new files side by side).",
+        "listed is there, unchanged, and the run finished. Exit 0 when complete and "
+        "consistent, 1 otherwise (a run killed while writing or stopped by Ctrl-C or a "
+        "signal, or old and new files side by side).",
     )
     verify.add_argument("directory", type=Path, metavar="DIR")
     _add_bake(sub)

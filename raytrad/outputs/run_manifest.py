@@ -121,9 +121,7 @@ def complete_set_key(directory: str | os.PathLike[str]) -> str | None:
     """The :func:`content_key` of the set in ``directory`` when the set verifies and its
     run was not interrupted; None otherwise."""
     manifest = read_manifest(directory)
-    if manifest is None or manifest.get("stop_reason") == "interrupted":
-        return None
-    if verify_outputs(directory):
+    if manifest is None or verify_outputs(directory):
         return None
     key = manifest.get("content_key")
     return key if isinstance(key, str) else None
@@ -136,8 +134,10 @@ def verify_outputs(directory: str | os.PathLike[str]) -> list[str]:
     Returns
     -------
     list of str
-        One line per problem: no manifest (an interrupted run, or none), an unreadable
-        manifest, a listed file missing, or one whose size or hash differs (a mixed set).
+        One line per problem: no manifest (a run killed while writing, or none), an
+        unreadable manifest, a run stopped by Ctrl-C or a signal (its outputs are the
+        solution so far), a listed file missing, or one whose size or hash differs (a
+        mixed set).
     """
     directory = Path(directory)
     path = directory / MANIFEST
@@ -152,6 +152,11 @@ def verify_outputs(directory: str | os.PathLike[str]) -> list[str]:
     except (ValueError, KeyError, TypeError) as exc:
         return [f"{path}: unreadable manifest ({exc})"]
     problems = []
+    if manifest.get("stop_reason") == "interrupted":
+        problems.append(
+            f"{path}: the run was interrupted (Ctrl-C or a signal): its outputs are the "
+            "solution so far; resume it to finish"
+        )
     for name, entry in sorted(files.items()):
         file = directory / name
         if not file.is_file():

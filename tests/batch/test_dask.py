@@ -52,6 +52,7 @@ def test_a_killed_dask_worker_is_retried_and_a_rerun_skips_all(tmp_path: Path) -
     assert f"taking over the lock of a run that is gone (pid {worker})" in stderr
     jobs = _summary(tmp_path)
     assert {job["status"] for job in jobs.values()} == {"done"}
+    assert jobs["out/cornell"]["recovered"] or jobs["out/cornell"]["resumed"]
     for name in ("cornell", "furnace", "big"):
         assert api.verify_outputs(tmp_path / "out" / name) == []
     alone = api.render(
@@ -66,6 +67,4 @@ def test_a_killed_dask_worker_is_retried_and_a_rerun_skips_all(tmp_path: Path) -
     assert rerun.returncode == 0, rerun.stderr
     record = json.loads((tmp_path / "bake-summary.json").read_text())
     assert record["counts"]["skipped"] == 3
-    assert record["runner"] == "Dask LocalCluster: 2 workers, 1 thread each" or record[
-        "runner"
-    ].startswith("Dask LocalCluster: 2 workers")
+    assert record["runner"].startswith("Dask LocalCluster: 2 workers")

@@ -101,6 +101,13 @@ def test_bad_manifests_are_refused_in_one_line(tmp_path: Path, text: str, messag
     assert "\n" not in str(caught.value)
 
 
+def test_a_bad_default_is_blamed_on_the_defaults(tmp_path: Path) -> None:
+    path = _write(tmp_path, "[defaults]\nrecievers = 5\n[[job]]\nscene = 's'\noutput = 'o'\n")
+    (spec,) = read_manifest(path)
+    with pytest.raises(SettingsError, match=r"bake\.toml: \[defaults\]: unknown option 'rec"):
+        job_from_spec(spec, path, _render_parser())
+
+
 def test_a_missing_manifest_is_one_line(tmp_path: Path) -> None:
     with pytest.raises(SettingsError, match=r"nowhere\.toml: cannot read the manifest"):
         read_manifest(tmp_path / "nowhere.toml")

@@ -67,3 +67,23 @@ def test_a_new_run_removes_the_old_manifest_before_writing(
     assert status == 1
     assert not (tmp_path / MANIFEST).exists()
     assert "no manifest" in verify_outputs(tmp_path)[0]
+
+
+def test_a_run_stopped_by_a_signal_does_not_verify_until_resumed(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Ctrl-C or SIGTERM writes a whole set of the solution so far; verify says it is
+    unfinished, and a resumed run makes it verify."""
+    from raytrad import api
+    from raytrad.core.mesh import MeshSettings
+    from raytrad.settings import RenderSettings
+
+    settings = RenderSettings(mesh=MeshSettings(receivers=500, patches=40))
+    stopped = api.render(SCENES / "cornell-box.obj", tmp_path, settings, stop=lambda: True)
+    assert stopped.result.stop_reason == "interrupted"
+    (problem,) = verify_outputs(tmp_path)
+    assert "the run was interrupted" in problem and "resume it" in problem
+    status, _, err = run_cli(["verify", str(tmp_path)], capsys)
+    assert status == 1 and "interrupted" in err
+    api.render(SCENES / "cornell-box.obj", tmp_path, settings, resume=True)
+    assert verify_outputs(tmp_path) == []
