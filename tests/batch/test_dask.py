@@ -68,3 +68,30 @@ def test_a_killed_dask_worker_is_retried_and_a_rerun_skips_all(tmp_path: Path) -
     record = json.loads((tmp_path / "bake-summary.json").read_text())
     assert record["counts"]["skipped"] == 3
     assert record["runner"].startswith("Dask LocalCluster: 2 workers")
+
+
+def test_bake_submits_to_a_running_scheduler(tmp_path: Path) -> None:
+    """``--scheduler ADDRESS``: jobs go to a cluster raytrad did not start; each render
+    takes its worker machine's cores divided by the worker's threads."""
+    from distributed import LocalCluster
+
+    write_obj(furnace_box(reflectance=0.5), tmp_path / "furnace.obj")
+    manifest = tmp_path / "bake.toml"
+    manifest.write_text(
+        '[defaults]\nreceivers = 600\npatches = 40\n[[job]]\nscene = "furnace.obj"\n'
+        'output = "out/furnace"\n[[job]]\nscene = "gone.obj"\noutput = "out/gone"\n'
+    )
+    with LocalCluster(
+        n_workers=1, threads_per_worker=2, processes=True, dashboard_address=None
+    ) as cluster:
+        argv = [sys.executable, "-m", "raytrad", "bake", str(manifest), "--scheduler"]
+        done = subprocess.run(
+            [*argv, cluster.scheduler_address], capture_output=True, text=True, timeout=600
+        )
+    assert done.returncode == 1, done.stderr  # the missing scene
+    jobs = _summary(tmp_path)
+    assert jobs["out/furnace"]["status"] == "done" and jobs["out/gone"]["status"] == "failed"
+    assert "file not found" in jobs["out/gone"]["message"]
+    assert api.verify_outputs(tmp_path / "out/furnace") == []
+    record = json.loads((tmp_path / "bake-summary.json").read_text())
+    assert record["runner"] == f"Dask scheduler {cluster.scheduler_address}"
