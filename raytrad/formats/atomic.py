@@ -5,6 +5,7 @@ from __future__ import annotations
 import contextlib
 import logging
 import os
+import re
 import tempfile
 from collections.abc import Iterator
 from pathlib import Path
@@ -121,3 +122,18 @@ def _fsync_directory(directory: Path) -> None:
         log.debug("could not fsync directory %s", directory)
     finally:
         os.close(fd)
+
+
+#: Names :func:`atomic_path` and :func:`atomic_write` give their temporary files:
+#: ``.<target>.<8 random characters>.tmp[<suffix>]``.
+_TEMPORARY = re.compile(r"^\..+\.[a-z0-9_]{8}\.tmp(\.[A-Za-z0-9]+)?$")
+
+
+def leftover_temporaries(directory: str | os.PathLike[str]) -> list[Path]:
+    """Temporary files of atomic writes in ``directory`` that never became their target:
+    what a process killed mid-write (``kill -9``) leaves. Only a caller that knows no
+    write is under way there (holding the folder's run lock) may remove them."""
+    folder = Path(directory)
+    if not folder.is_dir():
+        return []
+    return sorted(p for p in folder.iterdir() if p.is_file() and _TEMPORARY.match(p.name))

@@ -21,6 +21,7 @@ from pathlib import Path
 from types import TracebackType
 
 from raytrad.errors import SettingsError
+from raytrad.formats.atomic import leftover_temporaries
 
 log = logging.getLogger(__name__)
 
@@ -88,9 +89,21 @@ class RunLock:
                 continue
             with os.fdopen(fd, "w") as handle:
                 json.dump({"pid": os.getpid(), "host": host}, handle)
+            self._remove_leftovers()
             threading.Thread(target=self._heartbeat, name="raytrad-lock", daemon=True).start()
             return self
         raise SettingsError(f"{self.directory}: could not take the lock {self.path}")
+
+    def _remove_leftovers(self) -> None:
+        """Remove the temporary files of writes a killed run left (holding the lock, no
+        other write can be under way here)."""
+        leftovers = leftover_temporaries(self.directory)
+        for path in leftovers:
+            path.unlink(missing_ok=True)
+        if leftovers:
+            log.info(
+                "%s: removed %d temporary files a killed run left", self.directory, len(leftovers)
+            )
 
     def _heartbeat(self) -> None:
         while not self._stop_heartbeat.wait(HEARTBEAT_SECONDS):

@@ -110,3 +110,21 @@ def test_a_bake_job_waits_out_a_lost_workers_lock_elsewhere(
     assert result.status == "done", result.message
     assert time.monotonic() - start >= 1.0
     assert api.verify_outputs(tmp_path / "out") == []
+
+
+def test_temporaries_a_killed_run_left_are_removed_by_the_next(tmp_path: Path) -> None:
+    """kill -9 mid-write leaves ``.<name>.XXXXXXXX.tmp<suffix>`` files; the next run in the
+    folder, holding its lock, removes them and nothing else."""
+    import tempfile
+
+    tmp_path.mkdir(exist_ok=True)
+    left = [
+        tempfile.mkstemp(dir=tmp_path, prefix=".scene.lightmap.png.", suffix=".tmp.png")[1],
+        tempfile.mkstemp(dir=tmp_path, prefix=".report.json.", suffix=".tmp")[1],
+    ]
+    kept = [tmp_path / ".notes", tmp_path / "draft.tmp", tmp_path / ".a.b.tmp"]
+    for path in kept:
+        path.write_text("mine")
+    api.render(SCENES / "furnace.obj", tmp_path, SETTINGS)
+    assert not any(Path(p).exists() for p in left)
+    assert all(path.read_text() == "mine" for path in kept)
