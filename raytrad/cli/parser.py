@@ -229,11 +229,11 @@ def _add_bake(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     bake = sub.add_parser(
         "bake",
         help="render every job of a TOML manifest, on this machine or a Dask cluster",
-        description="Render the jobs of MANIFEST ([defaults] and [[job]] tables of render "
-        "options; scene and output paths relative to the manifest). Jobs whose outputs are "
-        "up to date are skipped, failed ones retried, and a summary is printed and written "
-        "to bake-summary.json beside the manifest. Exit 0 when every job is done or "
-        "skipped, 1 when one failed.",
+        description="Render the jobs of MANIFEST: [defaults] and [[job]] tables of render\n"
+        "options, scene and output paths relative to the manifest. Jobs whose outputs are\n"
+        "up to date are skipped, failed ones retried, and a summary is printed and written\n"
+        "to bake-summary.json beside the manifest. Exit 0 when every job is done or\n"
+        "skipped, 1 when one failed, 128 + N when stopped by signal N.",
         epilog=_BAKE_EXAMPLE,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
