@@ -52,8 +52,12 @@ def bake(
     Parameters
     ----------
     jobs : sequence of Job
-        Distinct names and output folders.
-    runner : Runner
+        With distinct names and distinct output folders.
+    runner : LocalPool or DaskRunner
+        Where the jobs run: :class:`~raytrad.batch.pool.LocalPool` (processes on this
+        machine) or :class:`~raytrad.batch.dask.DaskRunner` (a Dask cluster), or anything
+        with the :class:`Runner` methods. An exception while waiting (Ctrl-C in a script)
+        asks the running jobs to stop, closes the runner and propagates.
     retries : int
         Further attempts for a job that failed in a way trying again could help (an
         internal error, a full disk, a lost worker); a missing or broken scene is not
@@ -67,10 +71,28 @@ def bake(
     Raises
     ------
     ValueError
-        ``retries`` < 0.
+        ``retries`` < 0, or two jobs with one name or one output folder.
     """
     if retries < 0:
         raise ValueError(f"retries must be >= 0, got {retries}")
+    for what, values in (("name", [j.name for j in jobs]), ("output", [j.output for j in jobs])):
+        if len(set(values)) < len(values):
+            raise ValueError(f"two jobs have the same {what}; each job needs its own")
+    try:
+        return _run(jobs, runner, retries, on_result, stop)
+    except BaseException:
+        runner.interrupt()
+        runner.close()
+        raise
+
+
+def _run(
+    jobs: Sequence[Job],
+    runner: Runner,
+    retries: int,
+    on_result: Callable[[JobResult], None] | None,
+    stop: Callable[[], bool] | None,
+) -> list[JobResult]:
     queue = deque(jobs)
     attempts = {job.name: 0 for job in jobs}
     running: dict[Any, Job] = {}

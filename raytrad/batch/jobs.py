@@ -65,7 +65,7 @@ class JobResult:
     ----------
     name : str
     status : str
-        One of :data:`STATUSES`: ``done`` (rendered), ``skipped`` (outputs up to date),
+        ``done`` (rendered), ``skipped`` (outputs up to date),
         ``failed``, ``interrupted`` (stopped by a signal; its checkpoint resumes it) or
         ``not run`` (the bake stopped first).
     seconds : float

@@ -143,9 +143,15 @@ def run_bake(args: argparse.Namespace) -> int:
         finished += 1
         if not args.quiet or result.status == "failed":
             tail = f": {result.message}" if result.message else ""
+            status = result.status + (
+                " (resumed)"
+                if result.resumed
+                else " (after a lost run)"
+                if result.recovered
+                else ""
+            )
             print(
-                f"[{finished}/{len(jobs)}] {result.name}: {result.status} in "
-                f"{result.seconds:.1f} s{tail}",
+                f"[{finished}/{len(jobs)}] {result.name}: {status} in {result.seconds:.1f} s{tail}",
                 file=sys.stderr,
             )
 

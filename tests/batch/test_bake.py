@@ -142,6 +142,45 @@ def test_the_driver_retries_lost_jobs_a_bounded_number_of_times(tmp_path: Path) 
     assert results[1].status == "failed" and "worker lost (ConnectionError" in results[1].message
 
 
+class _InterruptedRunner(_FlakyRunner):
+    """Ctrl-C arrives while the driver waits."""
+
+    def __init__(self) -> None:
+        super().__init__("")
+        self.calls: list[str] = []
+
+    def wait(self, handles):  # type: ignore[no-untyped-def]
+        raise KeyboardInterrupt
+
+    def interrupt(self) -> None:
+        self.calls.append("interrupt")
+
+    def close(self) -> None:
+        self.calls.append("close")
+
+
+def test_an_exception_while_waiting_stops_and_closes_the_runner(tmp_path: Path) -> None:
+    runner = _InterruptedRunner()
+    with pytest.raises(KeyboardInterrupt):
+        bake([Job("a", tmp_path / "a.obj", tmp_path / "a")], runner)
+    assert runner.calls == ["interrupt", "close"]
+
+
+def test_jobs_must_have_their_own_names_and_folders(tmp_path: Path) -> None:
+    twins = [
+        Job("a", tmp_path / "s.obj", tmp_path / "o"),
+        Job("b", tmp_path / "s.obj", tmp_path / "o"),
+    ]
+    with pytest.raises(ValueError, match="same output"):
+        bake(twins, _FlakyRunner(""))
+    twins = [
+        Job("a", tmp_path / "s.obj", tmp_path / "o"),
+        Job("a", tmp_path / "s.obj", tmp_path / "p"),
+    ]
+    with pytest.raises(ValueError, match="same name"):
+        bake(twins, _FlakyRunner(""))
+
+
 def _wait_for_lock(folder: Path, process: subprocess.Popen[bytes], seconds: float = 120) -> int:
     """The pid of the process holding ``folder``'s lock, once it has one."""
     end = time.monotonic() + seconds
