@@ -145,6 +145,10 @@ class DaskRunner:
         if self._cluster is not None:
             self._cluster.close()
 
+    def abort(self) -> None:
+        self.interrupt()
+        self.close()
+
     def __enter__(self) -> DaskRunner:
         return self
 

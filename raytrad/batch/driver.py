@@ -39,6 +39,9 @@ class Runner(Protocol):
     def close(self) -> None:
         """Release processes and connections."""
 
+    def abort(self) -> None:
+        """Stop the running jobs at once (killed) and release everything."""
+
 
 def bake(
     jobs: Sequence[Job],
@@ -56,8 +59,9 @@ def bake(
     runner : LocalPool or DaskRunner
         Where the jobs run: :class:`~raytrad.batch.pool.LocalPool` (processes on this
         machine) or :class:`~raytrad.batch.dask.DaskRunner` (a Dask cluster), or anything
-        with the :class:`Runner` methods. An exception while waiting (Ctrl-C in a script)
-        asks the running jobs to stop, closes the runner and propagates.
+        with the :class:`Runner` methods. Ctrl-C while waiting aborts the running jobs
+        (they keep their last periodic checkpoint); another exception asks them to stop
+        cleanly and closes the runner; both propagate.
     retries : int
         Further attempts for a job that failed in a way trying again could help (an
         internal error, a full disk, a lost worker); a missing or broken scene is not
@@ -80,6 +84,9 @@ def bake(
             raise ValueError(f"two jobs have the same {what}; each job needs its own")
     try:
         return _run(jobs, runner, retries, on_result, stop)
+    except KeyboardInterrupt:  # Ctrl-C in a script, or a second one at the command line
+        runner.abort()
+        raise
     except BaseException:
         runner.interrupt()
         runner.close()

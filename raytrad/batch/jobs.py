@@ -27,6 +27,8 @@ from raytrad.settings import RenderSettings
 
 log = logging.getLogger(__name__)
 
+#: The convergence plot's file name (``plot = true``).
+PLOT = "convergence.png"
 #: Seconds between tries at a folder locked from another host.
 LOCK_POLL_SECONDS = 10.0
 #: What became of a job.
@@ -164,7 +166,7 @@ def run_job(job: Job, threads: int | None = None) -> JobResult:
         return JobResult(job.name, status, time.perf_counter() - start, 1, **facts)
 
     try:
-        if api.outputs_current(job.scene, job.output, job.settings):
+        if _current(job):
             return result("skipped", **_previous(job.output))
         resumed = any(Path(job.output).glob("*.checkpoint.npz"))
         recovered = (Path(job.output) / LOCK).exists()
@@ -193,6 +195,14 @@ def run_job(job: Job, threads: int | None = None) -> JobResult:
         resumed=resumed,
         recovered=recovered,
     )
+
+
+def _current(job: Job) -> bool:
+    """The job's folder holds its outputs: a current set, with the plot if it asks for
+    one (the plot is an output of the run, not of the settings)."""
+    if not api.outputs_current(job.scene, job.output, job.settings):
+        return False
+    return not job.plot or PLOT in (read_manifest(job.output) or {}).get("files", {})
 
 
 def _render(job: Job) -> api.RenderOutcome:

@@ -30,6 +30,8 @@ from raytrad.core.visibility import THREADS_VARIABLE, worker_count
 
 #: Seconds :meth:`LocalPool.wait` waits before returning (so that signals are seen).
 POLL_SECONDS = 0.5
+#: Seconds :meth:`LocalPool.close` gives a stopping job before it is killed.
+CLOSE_SECONDS = 60.0
 
 
 class WorkerLost(RuntimeError):
@@ -113,16 +115,30 @@ class LocalPool:
                 handle.process.send_signal(signal.SIGTERM)
 
     def close(self) -> None:
+        """Stop the running jobs cleanly (SIGTERM; they save checkpoints) and wait for
+        them, at most :data:`CLOSE_SECONDS` each; Ctrl-C while waiting kills them."""
         for handle in self._running:
             if handle.process.poll() is None:
                 handle.process.send_signal(signal.SIGTERM)
-        for handle in self._running:
-            try:
-                handle.process.wait(timeout=60)
-            except subprocess.TimeoutExpired:
+        try:
+            for handle in self._running:
+                try:
+                    handle.process.wait(timeout=CLOSE_SECONDS)
+                except subprocess.TimeoutExpired:
+                    handle.process.kill()
+        except KeyboardInterrupt:  # a second Ctrl-C: abort
+            for handle in self._running:
                 handle.process.kill()
-            shutil.rmtree(handle.folder, ignore_errors=True)
-        self._running.clear()
+            raise
+        finally:
+            for handle in self._running:
+                shutil.rmtree(handle.folder, ignore_errors=True)
+            self._running.clear()
+
+    def abort(self) -> None:
+        for handle in self._running:
+            handle.process.kill()
+        self.close()
 
     def __enter__(self) -> LocalPool:
         return self

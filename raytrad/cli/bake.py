@@ -106,9 +106,12 @@ class _Stop:
         return self.signum != 0
 
     def handler(self, signum: int, frame: FrameType | None) -> None:
+        if self.signum and signum == signal.SIGINT:
+            raise KeyboardInterrupt  # a second Ctrl-C: abort, killing the running jobs
         if not self.signum:
             print(
-                "\nraytrad: stopping the bake: running jobs save checkpoints, no new ones start",
+                "\nraytrad: stopping the bake: running jobs save checkpoints, no new ones "
+                "start (Ctrl-C again to abort)",
                 file=sys.stderr,
             )
         self.signum = signum

@@ -133,6 +133,8 @@ class _FlakyRunner:
 
     def close(self) -> None: ...
 
+    def abort(self) -> None: ...
+
 
 def test_the_driver_retries_lost_jobs_a_bounded_number_of_times(tmp_path: Path) -> None:
     jobs = [Job(n, tmp_path / f"{n}.obj", tmp_path / n) for n in ("a", "b")]
@@ -158,11 +160,24 @@ class _InterruptedRunner(_FlakyRunner):
     def close(self) -> None:
         self.calls.append("close")
 
+    def abort(self) -> None:
+        self.calls.append("abort")
+
+
+class _FailingRunner(_InterruptedRunner):
+    def wait(self, handles):  # type: ignore[no-untyped-def]
+        raise MemoryError
+
 
 def test_an_exception_while_waiting_stops_and_closes_the_runner(tmp_path: Path) -> None:
+    jobs = [Job("a", tmp_path / "a.obj", tmp_path / "a")]
     runner = _InterruptedRunner()
     with pytest.raises(KeyboardInterrupt):
-        bake([Job("a", tmp_path / "a.obj", tmp_path / "a")], runner)
+        bake(jobs, runner)
+    assert runner.calls == ["abort"]
+    runner = _FailingRunner()
+    with pytest.raises(MemoryError):
+        bake(jobs, runner)
     assert runner.calls == ["interrupt", "close"]
 
 
@@ -248,3 +263,36 @@ def test_a_local_pool_shares_the_cores(monkeypatch: pytest.MonkeyPatch) -> None:
     assert (LocalPool(2, 20).slots, LocalPool(2, 20).threads) == (2, 4)
     with pytest.raises(ValueError, match="workers must be >= 1"):
         LocalPool(0, 3)
+
+
+def test_a_job_asking_for_the_plot_is_rendered_until_the_plot_is_there(tmp_path: Path) -> None:
+    from raytrad.batch import run_job
+
+    _scenes(tmp_path)
+    settings = RenderSettings(mesh=MeshSettings(receivers=300, patches=30))
+    job = Job("furnace", tmp_path / "furnace.obj", tmp_path / "out", settings)
+    assert run_job(job).status == "done"
+    assert run_job(job).status == "skipped"
+    with_plot = Job("furnace", job.scene, job.output, settings, plot=True)
+    assert run_job(with_plot).status == "done"
+    assert (tmp_path / "out/convergence.png").is_file()
+    assert run_job(with_plot).status == "skipped"
+
+
+@POSIX
+def test_a_second_ctrl_c_aborts_the_bake(tmp_path: Path) -> None:
+    _scenes(tmp_path)
+    manifest = _manifest(tmp_path, receivers=6000)
+    argv = [sys.executable, "-m", "raytrad", "bake", str(manifest), "--workers", "1"]
+    process = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    worker = _wait_for_lock(tmp_path / "out/cornell", process)
+    process.send_signal(signal.SIGINT)
+    time.sleep(0.5)
+    process.send_signal(signal.SIGINT)
+    _, err = process.communicate(timeout=60)
+    assert process.returncode == 130, err.decode()
+    assert "aborted" in err.decode()
+    with pytest.raises(ProcessLookupError):  # the job's process was killed, not left behind
+        for _ in range(50):
+            os.kill(worker, 0)
+            time.sleep(0.1)
