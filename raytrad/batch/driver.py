@@ -11,6 +11,7 @@ from __future__ import annotations
 import logging
 from collections import deque
 from collections.abc import Callable, Collection, Sequence
+from pathlib import Path
 from typing import Any, Protocol
 
 from raytrad.batch.jobs import Job, JobResult
@@ -79,7 +80,8 @@ def bake(
     """
     if retries < 0:
         raise ValueError(f"retries must be >= 0, got {retries}")
-    for what, values in (("name", [j.name for j in jobs]), ("output", [j.output for j in jobs])):
+    folders = [Path(job.output).resolve() for job in jobs]  # out/a and ./out/a are one
+    for what, values in (("name", [job.name for job in jobs]), ("output", folders)):
         if len(set(values)) < len(values):
             raise ValueError(f"two jobs have the same {what}; each job needs its own")
     try:

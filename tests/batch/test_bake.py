@@ -184,7 +184,7 @@ def test_an_exception_while_waiting_stops_and_closes_the_runner(tmp_path: Path) 
 def test_jobs_must_have_their_own_names_and_folders(tmp_path: Path) -> None:
     twins = [
         Job("a", tmp_path / "s.obj", tmp_path / "o"),
-        Job("b", tmp_path / "s.obj", tmp_path / "o"),
+        Job("b", tmp_path / "s.obj", tmp_path / "x" / ".." / "o"),  # the same folder
     ]
     with pytest.raises(ValueError, match="same output"):
         bake(twins, _FlakyRunner(""))
