@@ -15,7 +15,13 @@ from raytrad.batch.driver import Runner, bake
 from raytrad.batch.jobs import STATUSES, Job, JobResult, run_job
 from raytrad.batch.manifest import JobSpec, read_manifest
 from raytrad.batch.pool import LocalPool
-from raytrad.batch.summary import SUMMARY, summary_record, summary_table, write_summary
+from raytrad.batch.summary import (
+    SUMMARY,
+    status_text,
+    summary_record,
+    summary_table,
+    write_summary,
+)
 
 __all__ = [
     "STATUSES",
@@ -29,6 +35,7 @@ __all__ = [
     "bake",
     "read_manifest",
     "run_job",
+    "status_text",
     "summary_record",
     "summary_table",
     "write_summary",

@@ -133,11 +133,10 @@ def log_to_stderr() -> None:
         logging.getLogger("trimesh").setLevel(logging.ERROR)
 
 
-def init_worker(threads: int) -> None:
-    """Set up a job's own process: ``threads`` for each render, warnings to stderr,
-    clean stop on SIGTERM and SIGINT."""
+def init_worker() -> None:
+    """Set up a job's own process: warnings to stderr, clean stop on SIGTERM and SIGINT
+    (its threads come in its environment, :data:`THREADS_VARIABLE`)."""
     log_to_stderr()
-    os.environ[THREADS_VARIABLE] = str(max(1, threads))
     for name in ("SIGTERM", "SIGINT"):
         signal.signal(getattr(signal, name), _StopOnSignal.handler)
 

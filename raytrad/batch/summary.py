@@ -46,6 +46,15 @@ def write_summary(path: Path, record: dict[str, Any]) -> None:
         json.dump(record, handle, indent=2)
 
 
+def status_text(status: str, resumed: bool, recovered: bool) -> str:
+    """A job's status as the table and the progress lines show it: marked ``(resumed)``
+    when it continued from a checkpoint, else ``(after a lost run)`` when it took over the
+    folder of a run that was lost."""
+    if resumed:
+        return f"{status} (resumed)"
+    return f"{status} (after a lost run)" if recovered else status
+
+
 def summary_table(record: dict[str, Any]) -> str:
     """The summary as a plain-text table, one row per job, and a closing count."""
     rows = [("job", "status", "tries", "seconds", "error", "outputs")]
@@ -56,11 +65,7 @@ def summary_table(record: dict[str, Any]) -> str:
         if folder.is_relative_to(base):
             folder = folder.relative_to(base)
         outputs = f"{len(job['outputs'])} files in {folder}" if job["outputs"] else "-"
-        status = job["status"]
-        if job["resumed"]:
-            status += " (resumed)"
-        elif job["recovered"]:
-            status += " (after a lost run)"
+        status = status_text(job["status"], job["resumed"], job["recovered"])
         rows.append(
             (job["name"], status, str(job["attempts"]), f"{job['seconds']:.1f}", error, outputs)
         )

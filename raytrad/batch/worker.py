@@ -11,14 +11,13 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from raytrad.batch.jobs import init_worker, run_job
-from raytrad.core.visibility import worker_count
 from raytrad.formats.atomic import atomic_write
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     job_path, result_path = (argv if argv is not None else sys.argv[1:])[:2]
     job = pickle.loads(Path(job_path).read_bytes())
-    init_worker(worker_count())  # the pool put the threads for this job in its environment
+    init_worker()
     result = run_job(job)
     with atomic_write(Path(result_path), "wb") as handle:
         pickle.dump(result, handle)

@@ -10,13 +10,13 @@ import sys
 import time
 from collections.abc import Sequence
 from pathlib import Path
-from types import FrameType
 from typing import Any
 
 from raytrad import api
 from raytrad.cli.bake import run_bake
 from raytrad.cli.options import render_settings
 from raytrad.cli.parser import build_parser
+from raytrad.cli.signals import StopFlag, stopping_on_signals
 
 log = logging.getLogger("raytrad")
 
@@ -66,36 +66,6 @@ class _Progress:
             self._bar.close()
 
 
-#: Signals that stop a render cleanly, as Ctrl-C does: schedulers and container runtimes
-#: stop work with SIGTERM, a closed terminal sends SIGHUP.
-_STOP_SIGNALS = tuple(
-    getattr(signal, name) for name in ("SIGINT", "SIGTERM", "SIGHUP") if hasattr(signal, name)
-)
-
-
-class _StopFlag:
-    """The first Ctrl-C, SIGTERM or SIGHUP asks the run to stop cleanly (the results so far
-    and a checkpoint are written); a second Ctrl-C aborts."""
-
-    def __init__(self) -> None:
-        self.requested = False
-        self.signum = 0
-
-    def __call__(self) -> bool:
-        return self.requested
-
-    def handler(self, signum: int, frame: FrameType | None) -> None:
-        if self.requested:
-            raise KeyboardInterrupt
-        self.requested = True
-        self.signum = signum
-        print(
-            "\nraytrad: stopping after the current column or shot, then writing the "
-            "results and a checkpoint (Ctrl-C again to abort)",
-            file=sys.stderr,
-        )
-
-
 def _compare(args: argparse.Namespace) -> int:
     methods = [m.strip() for m in args.methods.split(",") if m.strip()]
     summary = api.compare(
@@ -112,22 +82,23 @@ def _compare(args: argparse.Namespace) -> int:
 def _render(args: argparse.Namespace) -> int:
     settings = render_settings(args, args.method)
     progress = _Progress(enabled=not args.quiet)
-    stop = _StopFlag()
-    previous = {signum: signal.signal(signum, stop.handler) for signum in _STOP_SIGNALS}
+    stop = StopFlag(
+        "stopping after the current column or shot, then writing the results and a "
+        "checkpoint (Ctrl-C again to abort)"
+    )
     try:
-        outcome = api.render(
-            args.scene,
-            args.output,
-            settings,
-            args.resume,
-            progress,
-            stop,
-            reference=args.reference,
-            plot=args.plot,
-        )
+        with stopping_on_signals(stop):
+            outcome = api.render(
+                args.scene,
+                args.output,
+                settings,
+                args.resume,
+                progress,
+                stop,
+                reference=args.reference,
+                plot=args.plot,
+            )
     finally:
-        for signum, handler in previous.items():
-            signal.signal(signum, handler)
         progress.close()
     if not args.quiet:
         _print_summary(outcome.report, outcome.outputs)

@@ -9,7 +9,6 @@ import signal
 import sys
 import time
 from pathlib import Path
-from types import FrameType
 from typing import Any
 
 from raytrad.batch import (
@@ -28,6 +27,7 @@ from raytrad.batch import (
 )
 from raytrad.cli.options import render_settings
 from raytrad.cli.parser import build_parser
+from raytrad.cli.signals import StopFlag, stopping_on_signals
 from raytrad.settings import SettingsError
 
 #: Render options a manifest cannot set: the job gives scene and output, a bake resumes
@@ -96,27 +96,6 @@ def job_from_spec(spec: JobSpec, manifest: Path, render: argparse.ArgumentParser
     return Job(spec.name, spec.scene, spec.output, settings, plot=args.plot)
 
 
-class _Stop:
-    """Ctrl-C, SIGTERM or SIGHUP: running jobs stop cleanly and save checkpoints."""
-
-    def __init__(self) -> None:
-        self.signum = 0
-
-    def __call__(self) -> bool:
-        return self.signum != 0
-
-    def handler(self, signum: int, frame: FrameType | None) -> None:
-        if self.signum and signum == signal.SIGINT:
-            raise KeyboardInterrupt  # a second Ctrl-C: abort, killing the running jobs
-        if not self.signum:
-            print(
-                "\nraytrad: stopping the bake: running jobs save checkpoints, no new ones "
-                "start (Ctrl-C again to abort)",
-                file=sys.stderr,
-            )
-        self.signum = signum
-
-
 def _runner(args: argparse.Namespace, jobs: int) -> Runner:
     if args.local_cluster is not None or args.scheduler is not None:
         return DaskRunner(jobs, args.local_cluster, args.scheduler)
@@ -158,14 +137,15 @@ def run_bake(args: argparse.Namespace) -> int:
                 file=sys.stderr,
             )
 
-    stop = _Stop()
-    signals = [getattr(signal, n) for n in ("SIGINT", "SIGTERM", "SIGHUP") if hasattr(signal, n)]
-    previous = {signum: signal.signal(signum, stop.handler) for signum in signals}
+    stop = StopFlag(
+        "stopping the bake: running jobs save checkpoints, no new ones start (Ctrl-C again "
+        "to abort)",
+        abort_on=(signal.SIGINT,),
+    )
     try:
-        results = bake(jobs, runner, args.retries, report, stop)
+        with stopping_on_signals(stop):
+            results = bake(jobs, runner, args.retries, report, stop)
     finally:
-        for signum, handler in previous.items():
-            signal.signal(signum, handler)
         runner.close()
     record = summary_record(
         manifest.resolve(), jobs, results, runner.description, time.perf_counter() - start
