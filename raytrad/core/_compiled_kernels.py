@@ -32,7 +32,6 @@ KERNELS = (
     "shoot",
     "_row_scales",
     "sinkhorn_columns",
-    "sum_shares",
 )
 
 
@@ -546,52 +545,3 @@ def sinkhorn_columns(
             capture[p] += receiver_area[j] * final
         capture[p] /= patch_area[p]
     return row_scale, col_scale, done, capture0, capture, final_rows
-
-
-def sum_shares(pair, source, weight, pairs):
-    """Weights summed per (pair, source), sources ascending within a pair, normalised to
-    sum 1 per pair (see :func:`raytrad.core.gather.numpy_sum_shares`; the same sums in the
-    same order). ``pair`` need not be sorted: a stable counting sort groups it, and each
-    pair's sources are summed in a dense scratch row."""
-    n = len(pair)
-    pointer = np.zeros(pairs + 1, dtype=np.int64)
-    for i in range(n):
-        pointer[pair[i] + 1] += 1
-    for p in range(pairs):
-        pointer[p + 1] += pointer[p]
-    fill = pointer[:-1].copy()
-    order = np.empty(n, dtype=np.int64)
-    for i in range(n):
-        order[fill[pair[i]]] = i
-        fill[pair[i]] += 1
-    top = 0
-    for i in range(n):
-        top = max(top, source[i])
-    scratch = np.zeros(top + 1)
-    touched = np.empty(n, dtype=np.int64)
-    out_source = np.empty(n, dtype=np.int64)
-    out_weight = np.empty(n)
-    out_pointer = np.zeros(pairs + 1, dtype=np.int64)
-    count = 0
-    for p in range(pairs):
-        used = 0
-        for k in range(pointer[p], pointer[p + 1]):
-            i = order[k]
-            s = source[i]
-            if scratch[s] == 0.0:
-                touched[used] = s
-                used += 1
-            scratch[s] += weight[i]
-        ascending = np.sort(touched[:used])
-        total = 0.0
-        for k in range(used):
-            s = ascending[k]
-            out_source[count + k] = s
-            out_weight[count + k] = scratch[s]
-            total += scratch[s]
-            scratch[s] = 0.0
-        for k in range(used):
-            out_weight[count + k] /= total
-        count += used
-        out_pointer[p + 1] = count
-    return out_pointer, out_source[:count].copy(), out_weight[:count].copy()

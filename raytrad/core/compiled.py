@@ -8,7 +8,8 @@ each pair is one loop, compiled once (``cache=True``, so later processes load it
 disk) and run without the GIL (``nogil=True``), so the form-factor engine's threads run
 on every core.
 
-:mod:`raytrad.core.kernels` keeps the numpy implementations as the reference: every
+:mod:`raytrad.core.kernels` and :mod:`raytrad.core.gather` keep the numpy implementations
+as the reference: every
 function here computes the same formula in the same order, and the tests compare the two
 to 1e-12 on random and adversarial pairs (grazing, coplanar, straddling the horizon).
 numba is imported only when a kernel is first asked for (:func:`get`), and
@@ -57,13 +58,16 @@ def _build() -> SimpleNamespace | None:
     except ImportError:  # pragma: no cover - numba is a dependency
         log.warning("numba is not installed: form factors use the slower numpy kernels")
         return None
-    from raytrad.core import _compiled_kernels as loops
+    from raytrad.core import _compiled_gather, _compiled_kernels
 
-    for name in loops.KERNELS:
-        if not hasattr(getattr(loops, name), "py_func"):  # not compiled yet
-            setattr(loops, name, _jit(numba, getattr(loops, name)))
+    kernels = {}
+    for loops in (_compiled_kernels, _compiled_gather):
+        for name in loops.KERNELS:
+            if not hasattr(getattr(loops, name), "py_func"):  # not compiled yet
+                setattr(loops, name, _jit(numba, getattr(loops, name)))
+            kernels[name] = getattr(loops, name)
     log.debug("compiled kernels ready in %.2f s", time.perf_counter() - start)
-    return SimpleNamespace(**{name: getattr(loops, name) for name in loops.KERNELS})
+    return SimpleNamespace(**kernels)
 
 
 def _jit(numba: Any, function: Any) -> Any:

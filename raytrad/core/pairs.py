@@ -20,7 +20,13 @@ import numpy as np
 
 from raytrad.constants import tol
 from raytrad.core import compiled
-from raytrad.core.gather import EMPTY, GATHER_RADII, GatherShares, GatherWeights
+from raytrad.core.gather import (
+    EMPTY,
+    GATHER_RADII,
+    GatherShares,
+    GatherWeights,
+    corner_form_factors,
+)
 from raytrad.core.kernels import (
     contour_form_factor,
     facing_triangle_sums,
@@ -193,7 +199,8 @@ class PairFactors:
             near_tri[n],
             near_w[n],
             near_share[n],
-            int(close.sum()),
+            x[close],
+            nx[close],
         )
         near = np.flatnonzero(close)
         gather = GatherWeights(near, factors[near], pointer, sources, shares)
@@ -364,7 +371,9 @@ class PairFactors:
         target = visible_centroid(corners, x[cc], nx[cc])
         target += tol.ray_offset * self.diagonal * self.mesh.triangle_normal[tri]
         # within a few of its sizes a receiver sees mostly the near part of a triangle
-        shares = np.full((len(tri), 3), 1.0 / 3.0)
+        raw = corner_form_factors(corners, self.mesh.triangle_normal[tri], x[cc], nx[cc])
+        total = raw.sum(axis=1, keepdims=True)
+        shares = np.divide(raw, total, out=np.full((len(tri), 3), 1.0 / 3.0), where=total > 0)
         size = np.linalg.norm(corners - np.roll(corners, 1, axis=1), axis=2).max(axis=1)
         distance = np.linalg.norm(corners.mean(axis=1) - x[cc], axis=1) / size
         for levels, lo, hi in ((3, 0.0, 1.0), (2, 1.0, SHARE_SIZES)):

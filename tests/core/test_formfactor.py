@@ -352,7 +352,7 @@ def test_room_edge_receivers_are_not_dark(
     points, _ = receiver_points(prepared.mesh, 1e-5 * prepared.engine.diagonal)
     darkest = edge[order]
     irradiance, _ = path_traced_radiosity(
-        prepared.scene, points[darkest], prepared.mesh.receiver_normal[darkest], paths=4000, seed=3
+        prepared.scene, points[darkest], prepared.mesh.receiver_normal[darkest], paths=40000, seed=3
     )
     mesh = prepared.mesh
     traced = (

@@ -16,11 +16,20 @@ import pytest
 
 from raytrad.core import compiled
 from raytrad.core.formfactor import receiver_points
-from raytrad.core.gather import numpy_sum_shares, sum_shares
-from raytrad.core.kernels import linear_corner_shares
+from raytrad.core.gather import (
+    GatherShares,
+    corner_form_factors,
+    numpy_subarea_spread,
+    numpy_sum_shares,
+    subarea_spread,
+    sum_shares,
+)
+from raytrad.core.kernels import linear_corner_shares, numpy_polygon_form_factor
+from raytrad.core.mesh import RadiosityMesh
 from raytrad.core.pipeline import Prepared
 from raytrad.core.solver import SolveResult, SolveSettings, solve
 from raytrad.products.probe import hemisphere_gather
+from raytrad.scene import Scene
 
 LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
 
@@ -54,6 +63,14 @@ def test_block_base_receivers_agree_with_an_independent_gather(
     assert np.percentile(np.abs(relative), 90) < 0.08
 
 
+def _uniform_barycentric(rng: np.random.Generator, n: int) -> np.ndarray:
+    """(n, 3) barycentric coordinates of points uniform over a triangle."""
+    a, b = rng.random(n), rng.random(n)
+    flip = a + b > 1
+    a, b = np.where(flip, 1 - a, a), np.where(flip, 1 - b, b)
+    return np.stack([1 - a - b, a, b], axis=1)
+
+
 def test_corner_shares_match_a_monte_carlo_integral() -> None:
     # s_k = integral of F(x <- y) lambda_k(y) dy / F over the triangle, by sampling
     # points on it uniformly: the factor-weighted mean barycentric coordinate.
@@ -64,11 +81,7 @@ def test_corner_shares_match_a_monte_carlo_integral() -> None:
         (np.array([0.05, 0.05, 0.05]), np.array([0.0, 0.0, -1.0])),  # above a corner
         (np.array([0.3, 0.3, 2.0]), np.array([0.0, 0.0, -1.0])),  # far: about 1/3 each
     ]
-    n = 400_000
-    a, b = rng.random(n), rng.random(n)
-    flip = a + b > 1
-    a, b = np.where(flip, 1 - a, a), np.where(flip, 1 - b, b)
-    bary = np.stack([1 - a - b, a, b], axis=1)
+    bary = _uniform_barycentric(rng, 400_000)
     y = bary @ triangle
     for point, normal in cases:
         d = y - point
@@ -81,6 +94,38 @@ def test_corner_shares_match_a_monte_carlo_integral() -> None:
         # and much closer than equal shares wherever those are far off
         assert np.abs(shares - expected).max() <= max(0.2 * np.abs(expected - 1 / 3).max(), 2e-3)
         assert abs(shares.sum() - 1.0) < 1e-12
+
+
+@pytest.mark.parametrize("sizes", [2.0, 3.0, 5.0])
+def test_corner_form_factors_match_a_monte_carlo_integral(sizes: float) -> None:
+    # A far sub-area's weight goes to its triangles' corners by what the receiver sees of
+    # each corner's part: F_k = integral of F(x <- y) lambda_k(y) dy over the triangle.
+    # Receivers at 2-5 triangle sizes, on a wall standing on the triangle's plane (a block
+    # side above a floor) and above it: the sum against the exact factor (Lambert), each
+    # share against uniform sampling of the triangle.
+    rng = np.random.default_rng(11)
+    triangle = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
+    up = np.array([0.0, 0.0, 1.0])
+    bary = _uniform_barycentric(rng, 400_000)
+    y = bary @ triangle
+    centre = triangle.mean(axis=0)
+    cases = [
+        (centre + np.array([-sizes, -0.3, 0.3]), np.array([1.0, 0.0, 0.0])),  # a wall
+        (centre + np.array([-sizes, sizes, 0.05]), np.array([0.7071, -0.7071, 0.0])),
+        (centre + np.array([0.2, 0.1, sizes]), -up),  # a ceiling above
+    ]
+    for point, normal in cases:
+        weights = corner_form_factors(triangle[None], up[None], point[None], normal[None])[0]
+        exact = numpy_polygon_form_factor(triangle[None], point[None], normal[None])[0]
+        assert exact > 0
+        assert abs(weights.sum() / exact - 1.0) < 0.005 / sizes**2  # a quadrature: O(h^2)
+        d = y - point
+        r2 = np.einsum("ij,ij->i", d, d)
+        kernel = np.clip(d @ normal, 0, None) * np.clip(-(d @ up), 0, None) / r2**2
+        expected = kernel @ bary / kernel.sum()
+        shares = weights / weights.sum()
+        error = np.abs(shares - expected).max()
+        assert error < 0.01 / sizes**2 + 0.001  # + the Monte Carlo integral's noise
 
 
 def test_shots_conserve_power_in_a_closed_box(
@@ -106,15 +151,82 @@ def test_compiled_share_sums_match_numpy() -> None:
     source = rng.integers(0, 500, 20000)
     source[:50] = 3  # repeated (pair, source): summed
     weight = rng.random(20000) + 1e-3
+    weight[100:400] = 0.0  # left out, like negative weights
+    weight[400:420] = -1.0
     fast = sum_shares(pair, source, weight, pairs)
     slow = numpy_sum_shares(pair, source, weight, pairs)
     np.testing.assert_array_equal(fast[0], slow[0])
     np.testing.assert_array_equal(fast[1], slow[1])
     np.testing.assert_allclose(fast[2], slow[2], rtol=1e-15, atol=0)
     # independent check: each pair's weights sum to 1 and carry the raw sums' proportions
-    sums = np.bincount(pair, weights=weight, minlength=pairs)
+    sums = np.bincount(pair, weights=np.maximum(weight, 0.0), minlength=pairs)
     got = np.add.reduceat(fast[2], fast[0][:-1][np.diff(fast[0]) > 0])
     np.testing.assert_allclose(got, 1.0, rtol=1e-12)
     k = np.flatnonzero(fast[1][fast[0][7] : fast[0][8]] == 3)[0] + fast[0][7]
     mask = (pair == 7) & (source == 3)
     assert fast[2][k] == pytest.approx(weight[mask].sum() / sums[7], rel=1e-12)
+
+
+@pytest.mark.skipif(compiled.get() is None, reason="numba is not installed")
+def test_compiled_subarea_spread_matches_numpy(cornell_mesh: tuple[Scene, RadiosityMesh]) -> None:
+    # Receivers a few centimetres off the Cornell box's surfaces, each with elements on
+    # sub-areas near it (spread by midpoint weights) and far from it (spread by area).
+    _, mesh = cornell_mesh
+    order = np.lexsort((np.arange(len(mesh.triangle_subarea)), mesh.triangle_subarea))
+    sub_ptr = np.searchsorted(mesh.triangle_subarea[order], np.arange(mesh.subarea_count + 1))
+    shares = GatherShares(mesh, order, sub_ptr)
+    rng = np.random.default_rng(5)
+    pairs = 200
+    home = rng.integers(0, mesh.subarea_count, pairs)
+    points = mesh.subarea_point[home] + 0.03 * mesh.subarea_normal[home]
+    normals = -mesh.subarea_normal[home]  # looking back at the surface, 3 cm away
+    near = np.argsort(np.linalg.norm(mesh.subarea_point[None] - points[:, None], axis=2), axis=1)
+    subareas = np.concatenate(
+        [near[:, 1:20].reshape(-1), rng.integers(0, mesh.subarea_count, 3000)]
+    )
+    sub_pair = np.concatenate([np.repeat(np.arange(pairs), 19), rng.integers(0, pairs, 3000)])
+    sub_weight = rng.random(len(subareas))
+    arrays = (
+        sub_pair,
+        subareas,
+        sub_weight,
+        shares.sub_ptr,
+        shares.sub_tri,
+        shares.tri_share,
+        shares.corner_share,
+        shares.corners,
+        shares.tri_corners,
+        shares.tri_normal,
+        points,
+        normals,
+        shares.sub_point,
+        shares.sub_reach,
+        shares.src_ptr,
+        shares.src,
+        shares.src_share,
+    )
+    fast, slow = subarea_spread(*arrays), numpy_subarea_spread(*arrays)
+    reach = np.linalg.norm(points[sub_pair] - mesh.subarea_point[subareas], axis=1)
+    near_elements = reach <= shares.sub_reach[subareas]
+    assert 100 < near_elements.sum() < len(subareas) - 100  # both kinds are exercised
+    stride = mesh.receiver_count
+    totals = []
+    for pair, source, weight in (fast, slow):
+        totals.append(np.bincount(pair * stride + source, weights=weight, minlength=pairs * stride))
+    np.testing.assert_allclose(totals[0], totals[1], rtol=1e-12, atol=1e-15 * totals[1].max())
+    # independently: a far element hands on its sampled weight; a near one what the
+    # receiver sees of its visible triangles (or, seeing none of them, its weight)
+    expected = np.where(np.diff(shares.src_ptr)[subareas] > 0, sub_weight, 0.0)
+    for k in np.flatnonzero(near_elements):
+        tris = shares.sub_tri[shares.sub_ptr[subareas[k]] : shares.sub_ptr[subareas[k] + 1]]
+        tris = tris[shares.corner_share[tris].sum(axis=1) > 0]
+        p = sub_pair[k]
+        seen = corner_form_factors(
+            shares.tri_corners[tris],
+            shares.tri_normal[tris],
+            np.repeat(points[p : p + 1], len(tris), axis=0),
+            np.repeat(normals[p : p + 1], len(tris), axis=0),
+        ).sum()
+        expected[k] = seen if seen > 0 else expected[k]
+    assert (expected[near_elements] != sub_weight[near_elements]).mean() > 0.5
+    np.testing.assert_allclose(fast[2].sum(), expected.sum(), rtol=1e-12)
