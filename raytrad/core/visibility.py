@@ -240,7 +240,7 @@ class Occluder:
         (N,) bool
         """
         hits = self._hemisphere_hits(points, normals, triangle_normals, double_sided, rays)
-        return (hits >= _BACK).all(axis=1)
+        return np.asarray((hits >= _BACK).all(axis=1))
 
     def probe_hemispheres(
         self,
