@@ -25,15 +25,20 @@ RAY_CHUNK = 1 << 16
 
 _MISS, _FRONT, _BACK, _COVER = 0, 1, 2, 3  # _COVER: a back face nearer than COVER_GAP
 
-#: A surface point most of whose probe rays end on the back of a single-sided surface
-#: nearer than this fraction of the scene's diagonal is covered: a lamp set just below
-#: the ceiling (0.05% in the Cornell box), a thin rug on a floor, a poster on a wall. It is
-#: hidden like a point shut in under a block (:meth:`Occluder.probe_hemispheres`): no one
-#: sees it but at grazing angles, and linear interpolation toward its dark value would
-#: draw a dark rim round the cover on the visible surface beside it. Kept small: a hidden
-#: point is shown with its visible neighbours' radiosity, so the floor under a table,
-#: which a camera can look into, must not be hidden.
+#: A surface point more than :data:`COVER_SHARE` of whose probe rays end on the back of a
+#: single-sided surface nearer than this fraction of the scene's diagonal is covered: a
+#: lamp set just below the ceiling (0.05% in the Cornell box), a thin rug on a floor, a
+#: poster on a wall. It is hidden like a point shut in under a block
+#: (:meth:`Occluder.probe_hemispheres`): no one sees it but at grazing angles, and linear
+#: interpolation toward its dark value would draw a dark rim round the cover on the
+#: visible surface beside it. Kept small: a hidden point is shown with its visible
+#: neighbours' radiosity, so the floor under a table, which a camera can look into, must
+#: not be hidden.
 COVER_GAP = 2e-3
+#: The share of probe rays that makes a point covered: below a half, so that a receiver
+#: right on the cover's outline (about 0.45 there) is hidden too; a point beside the
+#: outline sees the cover's back under a smaller share.
+COVER_SHARE = 0.4
 
 
 #: Environment variable capping the threads of one render (``raytrad bake`` sets it in
@@ -255,11 +260,11 @@ class Occluder:
         ``closed``: every ray hits the front of a surface, so the point sees no opening and
         no light-swallowing back face and its form factors must sum to 1
         (``FormFactorEngine.balance``); ``enclosed``: every ray hits a back face
-        (:meth:`enclosed`), or most hit a back face within :data:`COVER_GAP` (the point
-        is covered). Parameters as :meth:`enclosed`.
+        (:meth:`enclosed`), or more than :data:`COVER_SHARE` hit a back face within
+        :data:`COVER_GAP` (the point is covered). Parameters as :meth:`enclosed`.
         """
         hits = self._hemisphere_hits(points, normals, triangle_normals, double_sided, rays)
-        covered = (hits == _COVER).mean(axis=1) > 0.5
+        covered = (hits == _COVER).mean(axis=1) > COVER_SHARE
         return (hits == _FRONT).all(axis=1), (hits >= _BACK).all(axis=1) | covered
 
     def _hemisphere_hits(
