@@ -8,10 +8,10 @@ each pair is one loop, compiled once (``cache=True``, so later processes load it
 disk) and run without the GIL (``nogil=True``), so the form-factor engine's threads run
 on every core.
 
-:mod:`raytrad.core.kernels` and :mod:`raytrad.core.gather` keep the numpy implementations
-as the reference: every
-function here computes the same formula in the same order, and the tests compare the two
-to 1e-12 on random and adversarial pairs (grazing, coplanar, straddling the horizon).
+:mod:`raytrad.core.kernels` and :mod:`raytrad.core.gather` keep the numpy
+implementations as the reference: every function here computes the same formula in the
+same order, and the tests compare the two to 1e-12 on random and adversarial pairs
+(grazing, coplanar, straddling the horizon).
 numba is imported only when a kernel is first asked for (:func:`get`), and
 ``RAYTRAD_KERNELS=numpy`` in the environment keeps the numpy path.
 """

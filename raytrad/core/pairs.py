@@ -47,7 +47,7 @@ NEAR_FACTOR = 2.0
 #: A near triangle closer than this many of its sizes to a receiver spreads its gather
 #: weight over its corners by what the receiver sees of each part of it
 #: (:func:`~raytrad.core.kernels.linear_corner_shares`, split 3 times within one size,
-#: twice beyond), not equally.
+#: twice beyond); a farther one by :func:`~raytrad.core.gather.corner_form_factors`.
 SHARE_SIZES = 3.0
 #: Receiver-sample pairs per work chunk (bounds memory whatever the receiver count).
 PAIRS_PER_CHUNK = 1 << 17
@@ -351,7 +351,8 @@ class PairFactors:
         weight : (K,) float64, unoccluded exact factors (> 0 only)
         shares : (K, 3) float64, each corner's share of what the receiver sees of the
             triangle (:func:`~raytrad.core.kernels.linear_corner_shares` within
-            :data:`SHARE_SIZES` triangle sizes, else 1/3)
+            :data:`SHARE_SIZES` triangle sizes, else
+            :func:`~raytrad.core.gather.corner_form_factors`)
         """
         c, s = np.nonzero(near)
         if len(c) == 0:
@@ -371,11 +372,16 @@ class PairFactors:
         target = visible_centroid(corners, x[cc], nx[cc])
         target += tol.ray_offset * self.diagonal * self.mesh.triangle_normal[tri]
         # within a few of its sizes a receiver sees mostly the near part of a triangle
-        raw = corner_form_factors(corners, self.mesh.triangle_normal[tri], x[cc], nx[cc])
-        total = raw.sum(axis=1, keepdims=True)
-        shares = np.divide(raw, total, out=np.full((len(tri), 3), 1.0 / 3.0), where=total > 0)
+        shares = np.full((len(tri), 3), 1.0 / 3.0)
         size = np.linalg.norm(corners - np.roll(corners, 1, axis=1), axis=2).max(axis=1)
         distance = np.linalg.norm(corners.mean(axis=1) - x[cc], axis=1) / size
+        far = distance >= SHARE_SIZES
+        if far.any():
+            raw = corner_form_factors(
+                corners[far], self.mesh.triangle_normal[tri[far]], x[cc[far]], nx[cc[far]]
+            )
+            total = raw.sum(axis=1, keepdims=True)
+            shares[far] = np.divide(raw, total, out=shares[far], where=total > 0)
         for levels, lo, hi in ((3, 0.0, 1.0), (2, 1.0, SHARE_SIZES)):
             part = (distance >= lo) & (distance < hi)
             if part.any():
