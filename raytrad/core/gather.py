@@ -72,8 +72,7 @@ class GatherWeights:
     def subset(self, keep: np.ndarray) -> GatherWeights:
         """Only the near receivers where ``keep`` ((G,) bool) holds."""
         counts = np.diff(self.pointer)[keep]
-        starts = self.pointer[:-1][keep]
-        index = np.repeat(starts - np.cumsum(counts) + counts, counts) + np.arange(counts.sum())
+        _, index = _csr_slots(self.pointer, np.flatnonzero(keep))
         pointer = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
         return GatherWeights(
             self.receivers[keep],
