@@ -46,12 +46,23 @@ def test_render_furnace(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> N
     assert report["statistics"]["receivers"] == len(positions)
     assert report["energy_watts"]["emitted"] == pytest.approx([6.0, 6.0, 6.0], rel=1e-12)
     assert _ledger_balances(report["energy_watts"])
+    assert report["settings"]["mesh"]["imprint"] is True
     # nothing written but the results (no temporary files, no checkpoint)
     assert sorted(p.name for p in out.iterdir()) == [
         "furnace.ply",
         "raytrad-run.json",
         "report.json",
     ]
+
+
+def test_no_imprint_is_a_mesh_setting(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    out = tmp_path / "out"
+    argv = ["render", str(FURNACE_OBJ), "-o", str(out), *SMALL, "--no-imprint"]
+    status, _, err = run_cli(argv, capsys)
+    assert status == 0, err
+    report = json.loads((out / "report.json").read_text())
+    assert report["settings"]["mesh"]["imprint"] is False
+    np.testing.assert_allclose(read_radiosity_ply(out / "furnace.ply")[2], 2.0, rtol=2e-3)
 
 
 def test_max_shots_stops_early_and_says_so(

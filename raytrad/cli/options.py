@@ -100,6 +100,7 @@ def render_settings(args: argparse.Namespace, method: str) -> RenderSettings:
             samples=args.samples,
             emitter_samples=args.emitter_samples,
             seed=args.seed,
+            imprint=args.imprint,
         ),
         solve=SolveSettings(
             method=method,

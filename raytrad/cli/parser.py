@@ -403,6 +403,13 @@ def _add_common(parser: argparse.ArgumentParser, default_tolerance: float) -> No
         help="seed of the sample points; same seed, same result (default: %(default)s)",
     )
     add(
+        "--no-imprint",
+        dest="imprint",
+        action="store_false",
+        help="do not put contact lines (another surface's outline on a surface: a block's "
+        "foot on the floor) into the mesh",
+    )
+    add(
         "--scale",
         type=float,
         default=1.0,

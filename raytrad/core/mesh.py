@@ -20,7 +20,8 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from raytrad.constants import scene_extent, tol
+from raytrad.constants import scene_diagonal, scene_extent, tol
+from raytrad.core.imprint import imprint_outlines, outline_segments
 from raytrad.core.refine import (
     bisect_clusters,
     cluster_bounds,
@@ -31,6 +32,7 @@ from raytrad.core.refine import (
     refined_count_bound,
     surface_labels,
 )
+from raytrad.core.visibility import COVER_GAP
 from raytrad.errors import SceneError, SettingsError
 from raytrad.scene import Scene, triangle_areas_normals
 
@@ -156,6 +158,10 @@ class MeshSettings:
         Sub-areas per emitting patch: direct shadows are the sharpest features.
     seed : int
         Seed of the sample-point placement.
+    imprint : bool
+        Snap refined vertices onto other surfaces' outlines lying on a surface (a block's
+        foot on the floor, a lamp's rim under the ceiling):
+        :func:`~raytrad.core.imprint.imprint_outlines`.
     """
 
     max_edge: float | None = None
@@ -165,6 +171,7 @@ class MeshSettings:
     samples: int = 16
     emitter_samples: int = 256
     seed: int = 0
+    imprint: bool = True
 
     def __post_init__(self) -> None:
         if self.max_edge is not None and not self.max_edge > 0:
@@ -212,7 +219,12 @@ def build_mesh(
     emissive = (scene.material_emitted_exitance[material] > 0).any(axis=1)
     limit = _edge_limits(base_area, surface, emissive, max_edge, patch_size, settings)
     _check_refinement_budget(scene, positions[triangles], limit)
+    coarse = positions
     positions, fine, parent = refine(positions, triangles, limit)
+    if settings.imprint:
+        positions, fine, parent = _imprint(
+            scene, coarse, triangles, surface, positions, fine, parent
+        )
     fine_surface = surface[parent]
     area, normal = triangle_areas_normals(positions[fine])
     keep = area > 0
@@ -263,6 +275,34 @@ def build_mesh(
         settings.seed,
     )
     return replace(mesh, triangle_surface=fine_surface)
+
+
+def _imprint(
+    scene: Scene,
+    coarse: np.ndarray,
+    triangles: np.ndarray,
+    surface: np.ndarray,
+    positions: np.ndarray,
+    fine: np.ndarray,
+    parent: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The refined mesh with edges put on other surfaces' outlines lying within
+    :data:`~raytrad.core.visibility.COVER_GAP` of the diagonal from a surface
+    (:func:`~raytrad.core.imprint.imprint_outlines`)."""
+    gap = COVER_GAP * scene_diagonal(coarse[np.unique(triangles)])
+    positions, fine, parent, changed = imprint_outlines(
+        positions,
+        fine,
+        parent,
+        _source_index(scene, np.arange(len(triangles))),
+        surface,
+        coarse[triangles[: scene.triangle_count]],
+        outline_segments(coarse, triangles, surface),
+        gap,
+    )
+    if changed:
+        log.info("moved or added %d refined vertices on contact lines", changed)
+    return positions, fine, parent
 
 
 def _check_refinement_budget(scene: Scene, corners: np.ndarray, limit: np.ndarray) -> None:

@@ -45,7 +45,11 @@ def merge_vertices(
 def unique_edges(triangles: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Unique undirected edges and, per triangle, the index of edge k = (v_k, v_{k+1})."""
     directed = np.stack([triangles, np.roll(triangles, -1, axis=1)], axis=2).reshape(-1, 2)
-    edges, inverse = np.unique(np.sort(directed, axis=1), axis=0, return_inverse=True)
+    count = int(triangles.max()) + 1 if triangles.size else 1
+    # one int64 key per edge sorts as the (low, high) pairs would, at a fraction of the cost
+    keys = directed.min(axis=1) * count + directed.max(axis=1)
+    unique, inverse = np.unique(keys, return_inverse=True)
+    edges = np.stack([unique // count, unique % count], axis=1)
     return edges, inverse.reshape(-1, 3)
 
 

@@ -48,10 +48,16 @@ def test_a_lamp_just_below_the_ceiling_covers_the_ceiling_behind_it() -> None:
     scene = _room_with_sheet(2.0 - 1e-3, DOWN)
     assert 1e-3 < COVER_GAP * np.sqrt(12.0)
     behind = [[1.0, 2.0, 1.0], [0.75, 2.0, 1.2], [1.28, 2.0, 0.9]]  # 2 cm in from its edge
-    beside = [[1.0, 2.0, 0.6], [0.6, 2.0, 0.6], [1.0, 2.0, 1.4]]  # 10 cm outside it
-    points = np.array(behind + beside)
+    # on its outline and 0.2 mm outside it, along all four edges: half covered, and
+    # darker than anything a millimetre away (refinement puts receivers there)
+    t = np.linspace(0.75, 1.25, 6)
+    rim = [
+        np.stack([t, np.full(6, 2.0), np.full(6, edge)], 1) for edge in (0.7, 1.3, 0.6998, 1.3002)
+    ] + [np.stack([np.full(6, edge), np.full(6, 2.0), t], 1) for edge in (0.6998, 1.3002)]
+    beside = [[1.0, 2.0, 0.6], [0.6, 2.0, 0.6], [1.0, 2.0, 1.4], [1.0, 2.0, 0.69]]  # 10, 1 cm
+    points = np.concatenate([behind, *rim, beside])
     hidden = _hidden(scene, points, np.tile(DOWN, (len(points), 1)))
-    np.testing.assert_array_equal(hidden, [True] * 3 + [False] * 3)
+    np.testing.assert_array_equal(hidden, [True] * (3 + 36) + [False] * 4)
 
 
 @pytest.mark.parametrize("height", [0.1, 0.3, 1.0])
@@ -71,23 +77,32 @@ def test_the_ceiling_beside_the_cornell_lamp_has_no_dark_rim(
     # used to keep their dark value, and the triangles reaching from there past the
     # lamp's edge drew a dark rim round it: at 5 000 receivers, refined, the ceiling 1 mm
     # outside the lamp's -z edge showed 31% of what its hemisphere gathers, 2 mm outside
-    # 52%. Along the -z and +z edges the receivers behind the lamp, and those right on
-    # its outline, are covered, and the bake must agree with an independent gather of its
-    # own solution. (Along the -x and +x edges refinement puts receivers just outside
-    # the outline, truly darker and visible, and a rim remains: not yet fixed.)
+    # 52%. The receivers behind the lamp, and those right on its outline, are covered,
+    # and the bake must agree with an independent gather of its own solution beside all
+    # four edges. (Adaptive refinement, which this solve skips, puts receivers 0.16 mm
+    # outside the -x and +x edges; those are covered since COVER_SHARE is 0.2, and the
+    # test above checks points there. The lamp's outline is not imprinted on the
+    # ceiling: imprint.CONTACT_ANGLE.)
     prepared, result = cornell_fine
     mesh = prepared.mesh
     shown = fill_hidden(mesh, result.radiosity)
-    along = np.tile(np.linspace(0.22, 0.335, 12), 2)
+    along_x = np.tile(np.linspace(0.22, 0.335, 12), 2)
+    along_z = np.tile(np.linspace(0.232, 0.327, 12), 2)
+    y = np.full_like(along_x, 0.5488 - 1e-6)
     rows = []
     for gap in (0.002, 0.005, 0.01):
-        edge = np.repeat([0.227 - gap, 0.332 + gap], 12)  # beside the -z and +z edges
-        points = np.stack([along, np.full_like(along, 0.5488 - 1e-6), edge], 1)
+        beside_z = np.repeat([0.227 - gap, 0.332 + gap], 12)  # beside the -z and +z edges
+        beside_x = np.repeat([0.213 - gap, 0.343 + gap], 12)  # beside the -x and +x edges
+        points = np.concatenate(
+            [np.stack([along_x, y, beside_z], 1), np.stack([beside_x, y, along_z], 1)]
+        )
         normals = np.tile(DOWN, (len(points), 1))
         baked = radiosity_at(mesh, shown, points, normals)
         irradiance, _ = hemisphere_gather(mesh, shown, points, normals, rays=8192, seed=2)
         ceiling = int(np.argmax(mesh.receiver_position[:, 1]))
         gathered = mesh.receiver_reflectance[ceiling] * irradiance
-        rows.append(baked[:, 1].mean() / gathered[:, 1].mean())
-    print("ceiling beside the lamp, bake / gather at 2, 5, 10 mm:", np.round(rows, 3))
+        rows.append(
+            [baked[s, 1].mean() / gathered[s, 1].mean() for s in (slice(0, 24), slice(24, 48))]
+        )
+    print("ceiling beside the lamp's z and x edges, bake / gather at 2, 5, 10 mm:", rows)
     np.testing.assert_allclose(rows, 1.0, atol=0.1)

@@ -623,16 +623,17 @@ def test_write_baked_glb_nodes_images_and_materials(tmp_path: Path) -> None:
 
 @pytest.fixture(scope="module")
 def hidden_cornell(cornell_solved: Solved) -> tuple[RadiosityMesh, np.ndarray]:
-    """The Cornell box mesh (the blocks hide floor receivers, the lamp ceiling ones) and
-    its solved radiosity."""
+    """The Cornell box mesh (the lamp covers ceiling receivers) and its solved radiosity."""
     prepared, result = cornell_solved
     mesh = prepared.mesh
     assert mesh.receiver_visible is not None
     hidden = ~mesh.receiver_visible
     assert hidden.sum() >= 5
-    # floor receivers under the blocks, ceiling receivers behind the lamp
+    # ceiling receivers behind the lamp; the floor under the blocks is left out with its
+    # triangles (enclosed), and the floor receivers on the blocks' contact lines, which
+    # imprinting puts there, see the blocks' fronts
     height = mesh.receiver_position[hidden, 1]
-    assert (height < 1e-6).any() and (height > 0.5).any()
+    assert (height > 0.5).all()
     return mesh, result.radiosity
 
 
