@@ -28,6 +28,7 @@ POSIX = pytest.mark.skipif(sys.platform == "win32", reason="POSIX signals")
 
 
 @POSIX
+@pytest.mark.slow  # 40 s: a LocalCluster of two, a worker killed; CI runs it (-m slow)
 def test_a_killed_dask_worker_is_retried_and_a_rerun_skips_all(tmp_path: Path) -> None:
     write_obj(cornell_box(), tmp_path / "cornell.obj")
     write_obj(furnace_box(reflectance=0.5), tmp_path / "furnace.obj")
