@@ -159,9 +159,9 @@ class MeshSettings:
     seed : int
         Seed of the sample-point placement.
     imprint : bool
-        Snap refined vertices onto other surfaces' outlines lying on a surface (a block's
-        foot on the floor, a lamp's rim under the ceiling):
-        :func:`~raytrad.core.imprint.imprint_outlines`.
+        Put contact lines into the refined mesh: vertices moved onto, and edges split at,
+        other surfaces' outlines lying on a surface (a block's foot on the floor, a
+        shelf's ends on a wall): :func:`~raytrad.core.imprint.imprint_outlines`.
     """
 
     max_edge: float | None = None

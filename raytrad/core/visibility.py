@@ -37,8 +37,9 @@ _MISS, _FRONT, _BACK, _COVER = 0, 1, 2, 3  # _COVER: a back face nearer than COV
 COVER_GAP = 2e-3
 #: The share of probe rays that makes a point covered. A receiver right on the cover's
 #: outline scores about 0.45, one 0.16 mm outside the Cornell lamp's edge about the same
-#: and one 1 mm outside about 0.2 (its own darkness reaches no farther); at 0.4, 64 rays
-#: left a fifth of those on the outline visible and dark, and the triangles from them drew
+#: and one 0.5 mm outside about 0.2, 1 mm outside 0.06 (cosine-weighted rays under a
+#: lamp 0.5 mm down, inside COVER_GAP; its own darkness reaches no farther); at 0.4, 64 rays
+#: left a third of those on the outline visible and dark, and the triangles from them drew
 #: a rim 2 mm wide. The floor beside a block sees the block's front, not its back: 0.
 COVER_SHARE = 0.2
 
