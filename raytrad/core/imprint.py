@@ -136,10 +136,49 @@ def imprint_outlines(
     changed : int, vertices moved plus vertices added
     """
     positions = np.array(positions, dtype=np.float64)
+    if len(outlines.surface) == 0 or len(triangles) == 0:
+        return positions, triangles, parent, 0
+    # only triangles near an outline can change: the rounds work on those alone (a vertex
+    # a move or a split touches, and every triangle around it, lie within two of the
+    # longest refined edges of the outline), the rest keep their rows
+    corners = positions[triangles]
+    longest = float(np.linalg.norm(corners - np.roll(corners, 1, axis=1), axis=2).max())
+    near, _ = _candidate_pairs(corners.mean(axis=1), outlines.points, 2.0 * longest)
+    near = np.unique(near)
+    if len(near) == 0:
+        return positions, triangles, parent, 0
+    positions, part, part_parent, changed = _imprint_rounds(
+        positions,
+        triangles[near],
+        parent[near],
+        parent_source,
+        parent_surface,
+        source_corners,
+        outlines,
+        gap,
+    )
+    triangles, parent = triangles.copy(), parent.copy()
+    triangles[near], parent[near] = part[: len(near)], part_parent[: len(near)]
+    triangles = np.concatenate([triangles, part[len(near) :]])
+    parent = np.concatenate([parent, part_parent[len(near) :]])
+    return positions, triangles, parent, changed
+
+
+def _imprint_rounds(
+    positions: np.ndarray,
+    triangles: np.ndarray,
+    parent: np.ndarray,
+    parent_source: np.ndarray,
+    parent_surface: np.ndarray,
+    source_corners: np.ndarray,
+    outlines: Outlines,
+    gap: float,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
+    """The rounds of :func:`imprint_outlines` on ``triangles`` (those near an outline);
+    ``positions`` are changed in place and extended. Splits keep each split triangle's row
+    (one half) and append the rest."""
     changed = 0
     for _ in range(IMPRINT_ROUNDS):
-        if len(outlines.surface) == 0 or len(triangles) == 0:
-            break
         surface = parent_surface[parent]
         args = (outlines, gap)
         vertex, target = _crossing_snaps(positions, triangles, surface, *args)
