@@ -110,7 +110,9 @@ def imprint_outlines(
     an end of every crossing edge onto the segment (the least move that keeps the end in
     its scene triangles and no triangle folded or flattened), then splits the edges still
     crossing at the crossing (a line through a triangle's corner and across the opposite
-    edge, which no move can mend), at most one edge per triangle.
+    edge, which no move can mend), at most one edge per triangle, and puts an outline's
+    corner lying inside a triangle into it; up to :data:`IMPRINT_ROUNDS` rounds, on the
+    triangles near an outline only.
 
     Parameters
     ----------
