@@ -31,7 +31,7 @@ from raytrad.core.mesh import MAX_RECEIVERS, RadiosityMesh, surface_receivers
 from raytrad.core.refine import refine
 from raytrad.core.visibility import Occluder
 from raytrad.errors import SettingsError
-from raytrad.scene import Scene, triangle_areas_normals
+from raytrad.scene import Scene, barycentric_coordinates, triangle_areas_normals
 
 log = logging.getLogger(__name__)
 
@@ -426,15 +426,7 @@ def _interpolated(
     owner[refined.triangle_receivers.reshape(-1)] = np.repeat(parent, 3)
     tri = owner[new]
     corners = mesh.positions[mesh.triangles[tri]]
-    point = refined.receiver_position[new]
-    e0, e1 = corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]
-    rel = point - corners[:, 0]
-    d00, d01, d11 = (np.einsum("ij,ij->i", a, b) for a, b in ((e0, e0), (e0, e1), (e1, e1)))
-    d20, d21 = np.einsum("ij,ij->i", rel, e0), np.einsum("ij,ij->i", rel, e1)
-    denom = d00 * d11 - d01 * d01
-    w1 = (d11 * d20 - d01 * d21) / denom
-    w2 = (d00 * d21 - d01 * d20) / denom
-    weights = np.stack([1 - w1 - w2, w1, w2], axis=1)
+    weights = barycentric_coordinates(refined.receiver_position[new], corners)
     values = radiosity[mesh.triangle_receivers[tri]]
     return np.asarray(np.einsum("nk,nkc->nc", weights, values))
 

@@ -28,8 +28,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from raytrad.constants import sign_with_band
-from raytrad.core.refine import unique_edges
-from raytrad.scene import triangle_areas_normals
+from raytrad.core.refine import edge_keys, unique_edges
+from raytrad.scene import barycentric_coordinates, triangle_areas_normals
 
 #: Outlines of surfaces meeting a surface at more than this angle are imprinted on it
 #: [degrees]: a block's sides on the floor, a shelf's ends on a wall. A parallel surface
@@ -81,15 +81,17 @@ def outline_segments(positions: np.ndarray, triangles: np.ndarray, surface: np.n
     triangles : (T, 3) int64
     surface : (T,) int64, surface label per triangle
     """
-    directed = np.stack([triangles, np.roll(triangles, -1, axis=1)], axis=2).reshape(-1, 2)
-    keyed = np.concatenate([np.sort(directed, axis=1), np.repeat(surface, 3)[:, None]], axis=1)
-    _, first, count = np.unique(keyed, axis=0, return_index=True, return_counts=True)
-    once = first[count == 1]
+    edges, tri_edges = unique_edges(triangles)
+    # (edge, surface) pairs used once: one key each, edge-major
+    surfaces = int(surface.max()) + 1 if len(surface) else 1
+    keyed = tri_edges.reshape(-1) * surfaces + np.repeat(surface, 3)
+    _, first, count = np.unique(keyed, return_index=True, return_counts=True)
+    once = first[count == 1]  # rows of tri_edges: triangle once // 3
     _, normal = triangle_areas_normals(positions[triangles])
-    points = positions[keyed[once, :2]]
+    points = positions[edges[tri_edges.reshape(-1)[once]]]
     kept = np.linalg.norm(points[:, 1] - points[:, 0], axis=1) > 0
     kept &= np.linalg.norm(normal[once // 3], axis=1) > 0  # a degenerate triangle's edges
-    return Outlines(points[kept], keyed[once, 2][kept], normal[once // 3][kept])
+    return Outlines(points[kept], np.repeat(surface, 3)[once][kept], normal[once // 3][kept])
 
 
 def imprint_outlines(
@@ -223,16 +225,14 @@ def _split_edges(
     if len(ends) == 0:
         return positions, triangles, parent
     count = len(positions)
-    keys = np.sort(ends, axis=1) @ np.array([count, 1])
-    keys, first = np.unique(keys, return_index=True)
+    keys, first = np.unique(edge_keys(ends[:, 0], ends[:, 1], count), return_index=True)
     ends, points = ends[first], points[first]
     s = np.linalg.norm(points - positions[ends[:, 0]], axis=1) / np.linalg.norm(
         positions[ends[:, 1]] - positions[ends[:, 0]], axis=1
     )
     fair = (s > MIN_SPLIT) & (s < 1.0 - MIN_SPLIT)
     keys, points = keys[fair], points[fair]
-    rolled = np.roll(triangles, -1, axis=1)
-    tri_keys = np.minimum(triangles, rolled) * count + np.maximum(triangles, rolled)
+    tri_keys = edge_keys(triangles, np.roll(triangles, -1, axis=1), count)
     slot, corner = np.nonzero(np.isin(tri_keys, keys))
     holders: dict[int, list[tuple[int, int]]] = {}
     for t, k in zip(slot.tolist(), corner.tolist(), strict=True):
@@ -365,7 +365,7 @@ def _outline_corners(
     corners = positions[triangles[tri]]
     height = _dot(normal, ends[end] - corners[:, 0])
     point = ends[end] - height[:, None] * normal
-    weights = _barycentric(point, corners)
+    weights = barycentric_coordinates(point, corners)
     inside = (np.abs(height) <= gap) & (weights.min(axis=1) >= -SIDE_BAND)
     inside &= _meeting(normal, end_normal[end])
     inside &= weights.max(axis=1) < 1.0 - SIDE_BAND
@@ -414,18 +414,6 @@ def _insert_corners(
     positions = np.concatenate([positions, point[inner]])
     ends = np.stack([a[near], b[near]], axis=1)
     return _split_edges(positions, triangles, parent, ends, foot[near])
-
-
-def _barycentric(points: np.ndarray, corners: np.ndarray) -> np.ndarray:
-    """(N, 3) barycentric coordinates of ``points`` in the planes of ``corners`` (N, 3, 3)."""
-    e1, e2 = corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]
-    d = points - corners[:, 0]
-    d11, d12, d22 = _dot(e1, e1), _dot(e1, e2), _dot(e2, e2)
-    det = d11 * d22 - d12 * d12
-    det = np.where(det > 0, det, np.nan)  # a degenerate triangle: NaN, inside nothing
-    u = (d22 * _dot(d, e1) - d12 * _dot(d, e2)) / det
-    v = (d11 * _dot(d, e2) - d12 * _dot(d, e1)) / det
-    return np.stack([1.0 - u - v, u, v], axis=1)
 
 
 def _candidate_pairs(
@@ -530,7 +518,9 @@ def _in_triangle(points: np.ndarray, corners: np.ndarray) -> np.ndarray:
     height = np.abs(_dot(points - corners[:, 0], normal))
     e1, e2 = corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]
     longest = np.maximum(np.linalg.norm(e1, axis=1), np.linalg.norm(e2, axis=1))
-    inside = _barycentric(points, corners).min(axis=1) >= -1e-9  # NaN (degenerate): False
+    inside = (
+        barycentric_coordinates(points, corners).min(axis=1) >= -1e-9
+    )  # NaN (degenerate): False
     return inside & (height <= PLANE_BAND * longest) & (area > 0)
 
 

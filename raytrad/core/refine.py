@@ -42,13 +42,17 @@ def merge_vertices(
     return positions[used[first]], remap[triangles]
 
 
+def edge_keys(a: np.ndarray, b: np.ndarray, count: int) -> np.ndarray:
+    """One int64 per undirected edge (a, b) of vertices below ``count``: the same for (b, a),
+    and sorting the keys sorts the (low, high) pairs."""
+    return np.minimum(a, b) * count + np.maximum(a, b)
+
+
 def unique_edges(triangles: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Unique undirected edges and, per triangle, the index of edge k = (v_k, v_{k+1})."""
-    directed = np.stack([triangles, np.roll(triangles, -1, axis=1)], axis=2).reshape(-1, 2)
     count = int(triangles.max()) + 1 if triangles.size else 1
-    # one int64 key per edge sorts as the (low, high) pairs would, at a fraction of the cost
-    keys = directed.min(axis=1) * count + directed.max(axis=1)
-    unique, inverse = np.unique(keys, return_inverse=True)
+    keys = edge_keys(triangles, np.roll(triangles, -1, axis=1), count)  # (T, 3)
+    unique, inverse = np.unique(keys.reshape(-1), return_inverse=True)
     edges = np.stack([unique // count, unique % count], axis=1)
     return edges, inverse.reshape(-1, 3)
 

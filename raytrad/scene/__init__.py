@@ -7,6 +7,7 @@ from __future__ import annotations
 from raytrad.scene.camera import Camera, NamedCamera
 from raytrad.scene.model import (
     Scene,
+    barycentric_coordinates,
     has_emission,
     make_scene,
     scene_digests,
@@ -18,6 +19,7 @@ __all__ = [
     "Camera",
     "NamedCamera",
     "Scene",
+    "barycentric_coordinates",
     "has_emission",
     "make_scene",
     "scene_digests",

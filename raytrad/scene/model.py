@@ -115,6 +115,33 @@ class Scene:
         return replace(self, positions=self.positions * float(factor))
 
 
+def barycentric_coordinates(points: np.ndarray, corners: np.ndarray) -> np.ndarray:
+    """Barycentric coordinates of points in the planes of triangles.
+
+    Parameters
+    ----------
+    points : (N, 3) float [m]
+        Points (projected onto each triangle's plane by the least-squares solve).
+    corners : (N, 3, 3) float
+        One triangle's corners per point [m].
+
+    Returns
+    -------
+    (N, 3) float64 weights of the three corners, summing to 1; NaN rows for degenerate
+    triangles (inside nothing: every comparison with them is False).
+    """
+    corners = np.asarray(corners, dtype=np.float64)
+    e1, e2 = corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]
+    d = np.asarray(points, dtype=np.float64) - corners[:, 0]
+    d11, d12, d22 = (np.einsum("ij,ij->i", a, b) for a, b in ((e1, e1), (e1, e2), (e2, e2)))
+    d1, d2 = np.einsum("ij,ij->i", d, e1), np.einsum("ij,ij->i", d, e2)
+    det = d11 * d22 - d12 * d12
+    det = np.where(det > 0, det, np.nan)
+    u = (d22 * d1 - d12 * d2) / det
+    v = (d11 * d2 - d12 * d1) / det
+    return np.stack([1.0 - u - v, u, v], axis=1)
+
+
 def triangle_areas_normals(corners: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Areas and unit normals of triangles.
 

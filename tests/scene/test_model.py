@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from raytrad.errors import SceneError
-from raytrad.scene import Scene, make_scene, triangle_areas_normals
+from raytrad.scene import Scene, barycentric_coordinates, make_scene, triangle_areas_normals
 from tests.conftest import triangle_soup, uv_at_corner
 
 # --------------------------------------------------------------------------- Scene methods
@@ -141,3 +141,16 @@ def test_make_scene_default_object_is_the_source_stem() -> None:
     assert scene.object_names == ("hall",)
     np.testing.assert_array_equal(scene.object_index, 0)
     assert scene.lightmap_uv is None
+
+
+def test_barycentric_coordinates_recover_the_weights_a_point_was_made_with() -> None:
+    rng = np.random.default_rng(4)
+    corners = rng.normal(size=(50, 3, 3)) * 10.0 + 1e4  # far from the origin
+    weights = rng.dirichlet([1.0, 1.0, 1.0], size=50)
+    weights[0] = [1.2, -0.5, 0.3]  # outside the triangle
+    points = np.einsum("nk,nkd->nd", weights, corners)
+    _, normal = triangle_areas_normals(corners)
+    lifted = points + 0.01 * normal  # off the plane: the same weights
+    np.testing.assert_allclose(barycentric_coordinates(lifted, corners), weights, atol=1e-9)
+    flat = np.array([[[0.0, 0, 0], [1, 0, 0], [2, 0, 0]]])  # degenerate: inside nothing
+    assert np.isnan(barycentric_coordinates(np.zeros((1, 3)), flat)).all()
