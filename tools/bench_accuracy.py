@@ -2,7 +2,7 @@
 
 The reference is raytrad's Monte Carlo path tracer (:mod:`raytrad.core.pathtrace`), which
 shares only the scene and Embree with the solver, at many paths per point. Points are
-drawn area-uniformly on every quad of the scene (the Cornell box's 16 surfaces), plus
+drawn area-uniformly (stratified) on every quad of the scene (the Cornell box's 16 surfaces), plus
 points at a few millimetres from every contact line (block sides against the floor). The
 bake's radiosity at each point is what a lightmap or image shows: the vertex radiosity
 interpolated over the refined triangle under the point.
@@ -72,25 +72,40 @@ def quad_corners(scene: Scene) -> np.ndarray:
 
 
 def area_probes(scene: Scene, per_quad: int, rng: np.random.Generator) -> Probes:
-    """``per_quad`` area-uniform points on every quad (the light excluded)."""
+    """``per_quad`` area-uniform points on every quad (the light excluded), stratified.
+
+    Each quad gets one jittered point in every cell of a ``side`` x ``side`` grid over the
+    unit square (``side = ceil(sqrt(per_quad))``, so ``side**2`` points), mapped onto the
+    quad by an area-preserving map: the square's first ``A0 / A`` of ``s`` onto triangle 0,
+    the rest onto triangle 1, each by Shirley's square-to-triangle map
+    ``(1 - sqrt(s)) a + sqrt(s) (1 - t) b + sqrt(s) t c``. Stratified points measure an
+    error confined to a strip (a penumbra on the floor) far more steadily than random
+    ones: with 64 random points per quad, the 4 000-receiver bake's true point RMS had a
+    90 % bootstrap interval of 0.50-1.25 %.
+    """
     corners = scene.triangle_vertices()
     areas, normals = triangle_areas_normals(corners)
+    side = max(1, int(np.ceil(np.sqrt(per_quad))))
+    i, j = np.divmod(np.arange(side * side), side)
     points, probe_normals, quads = [], [], []
     for q in range(len(corners) // 2):
-        rows = np.array([2 * q, 2 * q + 1])
-        pick = rows[(rng.random(per_quad) * areas[rows].sum() > areas[rows[0]]).astype(int)]
-        u, v = rng.random(per_quad), rng.random(per_quad)
-        flip = u + v > 1
-        u, v = np.where(flip, 1 - u, u), np.where(flip, 1 - v, v)
-        c = corners[pick]
-        points.append(c[:, 0] + u[:, None] * (c[:, 1] - c[:, 0]) + v[:, None] * (c[:, 2] - c[:, 0]))
-        probe_normals.append(normals[pick])
-        quads.append(np.full(per_quad, q))
+        s = (i + rng.random(side * side)) / side
+        t = (j + rng.random(side * side)) / side
+        split = areas[2 * q] / (areas[2 * q] + areas[2 * q + 1])
+        second = s >= split
+        s = np.where(second, (s - split) / (1.0 - split), s / split)
+        c = corners[2 * q + second.astype(int)]
+        root = np.sqrt(s)[:, None]
+        points.append(
+            (1 - root) * c[:, 0] + root * (1 - t[:, None]) * c[:, 1] + root * t[:, None] * c[:, 2]
+        )
+        probe_normals.append(normals[2 * q + second.astype(int)])
+        quads.append(np.full(side * side, q))
     return Probes(
         np.concatenate(points),
         np.concatenate(probe_normals),
         np.concatenate(quads),
-        np.full(per_quad * len(corners) // 2, np.inf),
+        np.full(side * side * (len(corners) // 2), np.inf),
     )
 
 
@@ -280,7 +295,7 @@ def report(
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--receivers", type=int, nargs="+", default=[20000, 5000])
-    parser.add_argument("--per-quad", type=int, default=64)
+    parser.add_argument("--per-quad", type=int, default=256)
     parser.add_argument("--along", type=int, default=8)
     parser.add_argument("--paths", type=int, default=20000)
     parser.add_argument(
