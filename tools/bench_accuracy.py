@@ -109,15 +109,16 @@ def area_probes(scene: Scene, per_quad: int, rng: np.random.Generator) -> Probes
     )
 
 
-def contact_probes(scene: Scene, along: int) -> Probes:
+def contact_probes(scene: Scene, along: int, first_side: int = 6) -> Probes:
     """Points beside each block side's bottom edge: on the floor in front of it and on the
-    side above the floor, at :data:`CONTACT_DISTANCES`."""
+    side above the floor, at :data:`CONTACT_DISTANCES`. Quad 0 is the floor; the vertical
+    quads from ``first_side`` on are block sides."""
     quads = quad_corners(scene)
     _, normals = triangle_areas_normals(scene.triangle_vertices()[0::2])
     floor_normal = normals[0]
     points, probe_normals, owner, distance = [], [], [], []
     for q in range(len(quads)):
-        if abs(normals[q] @ floor_normal) > 1e-6 or q < 6:
+        if abs(normals[q] @ floor_normal) > 1e-6 or q < first_side:
             continue  # not a vertical block side
         bottom = quads[q][np.argsort(quads[q][:, 1])[:2]]
         t = (np.arange(along) + 0.5) / along
@@ -160,14 +161,14 @@ def shut_in(scene: Scene, probes: Probes, rays: int = 256) -> np.ndarray:
 
 
 def reference(
-    scene: Scene, probes: Probes, paths: int, cache: Path
+    scene: Scene, probes: Probes, paths: int, cache: Path, name: str = "cornell"
 ) -> tuple[np.ndarray, np.ndarray]:
     """(N, 3) path-traced radiosity [W m-2] at the probes and its standard error, cached
     by content."""
     key = hashlib.sha256(
         probes.points.tobytes() + probes.normals.tobytes() + str(paths).encode()
     ).hexdigest()[:16]
-    path = cache / f"cornell-{key}.npz"
+    path = cache / f"{name}-{key}.npz"
     if path.exists():
         cached = np.load(path)
         return cached["radiosity"], cached["error"]
