@@ -21,7 +21,8 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from raytrad.constants import scene_diagonal, scene_extent, tol
-from raytrad.core.imprint import imprint_outlines, outline_segments
+from raytrad.core.imprint import Outlines, imprint_outlines, outline_segments
+from raytrad.core.intersections import intersection_segments
 from raytrad.core.refine import (
     bisect_clusters,
     cluster_bounds,
@@ -287,8 +288,10 @@ def _imprint(
     parent: np.ndarray,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The refined mesh with edges put on other surfaces' outlines lying within
-    :data:`~raytrad.core.visibility.COVER_GAP` of the diagonal from a surface
-    (:func:`~raytrad.core.imprint.imprint_outlines`)."""
+    :data:`~raytrad.core.visibility.COVER_GAP` of the diagonal from a surface, and on the
+    lines where surfaces pass through each other (a block sunk into the floor)
+    (:func:`~raytrad.core.imprint.imprint_outlines`,
+    :func:`~raytrad.core.intersections.intersection_segments`)."""
     gap = COVER_GAP * scene_diagonal(coarse[np.unique(triangles)])
     positions, fine, parent, changed = imprint_outlines(
         positions,
@@ -297,12 +300,25 @@ def _imprint(
         _source_index(scene, np.arange(len(triangles))),
         surface,
         coarse[triangles[: scene.triangle_count]],
-        outline_segments(coarse, triangles, surface),
+        _contact_lines(coarse, triangles, surface, gap),
         gap,
     )
     if changed:
         log.info("moved or added %d refined vertices on contact lines", changed)
     return positions, fine, parent
+
+
+def _contact_lines(
+    positions: np.ndarray, triangles: np.ndarray, surface: np.ndarray, gap: float
+) -> Outlines:
+    """Surfaces' outlines and the lines where surfaces pass through each other."""
+    outline = outline_segments(positions, triangles, surface)
+    crossing = intersection_segments(positions, triangles, surface, gap)
+    return Outlines(
+        np.concatenate([outline.points, crossing.points]),
+        np.concatenate([outline.surface, crossing.surface]),
+        np.concatenate([outline.normal, crossing.normal]),
+    )
 
 
 def _check_refinement_budget(scene: Scene, corners: np.ndarray, limit: np.ndarray) -> None:
