@@ -18,7 +18,9 @@ Each row bakes adaptively (raytrad's default refinement) at ``--receivers N`` an
 (``--refine-threshold 0``) at a receiver target chosen so that the uniform mesh has at
 least as many receivers as the adaptive bake ended with (uniform meshes come in steps, so
 the uniform bake may have more); the last column is uniform / adaptive (the issue's
-target: at least 2 in the penumbra and at the contact line).
+target: at least 2 in the penumbra and at the contact line). Each bake's reported total
+error (``error.total_rms``) is set against its true error over the area points, weighted
+by the area each stands for.
 
     python tools/bench_penumbra.py --receivers 2000 5000
 """
@@ -108,6 +110,16 @@ def probes(scene: Scene, rng: np.random.Generator) -> tuple[acc.Probes, np.ndarr
     return out, names
 
 
+def area_weights(scene: Scene, points: acc.Probes, names: np.ndarray) -> np.ndarray:
+    """(N,) the area each floor or block-face point stands for [m2] (its quad's area over
+    the quad's point count; contact points 0)."""
+    area = acc.triangle_areas_normals(scene.triangle_vertices())[0]
+    quad_area = area[0::2] + area[1::2]
+    counted = names != "contact"
+    count = np.bincount(points.quad[counted], minlength=len(quad_area))
+    return np.where(counted, quad_area[points.quad] / np.maximum(count[points.quad], 1), 0.0)
+
+
 def light_share(scene: Scene, points: np.ndarray, side: int = 16) -> np.ndarray:
     """(N,) share of the light each floor point sees, by ``side`` x ``side`` stratified
     samples over the light."""
@@ -155,10 +167,21 @@ def uniform_target(scene: Scene, receivers: int, ratio: float) -> tuple[int, int
     return best, enough[best]
 
 
-def errors(got: np.ndarray, ref: np.ndarray, ref_error: np.ndarray, names: np.ndarray) -> dict:
-    """Relative RMS per class, the reference's noise taken out (worst channel)."""
+def errors(
+    got: np.ndarray,
+    ref: np.ndarray,
+    ref_error: np.ndarray,
+    names: np.ndarray,
+    weight: np.ndarray,
+) -> dict:
+    """Relative RMS per class, the reference's noise taken out (worst channel); and
+    ``area-weighted``, over every area point weighted by the area it stands for, as
+    raytrad's reported total error is measured."""
     out = {}
     ok = ~np.isnan(got).any(axis=1) & (ref.sum(axis=1) > 0)
+    w = np.where(ok & (weight > 0), weight, 0.0)
+    square = (w @ ((np.where(ok[:, None], got, 0.0) - ref) ** 2 - ref_error**2)) / (w @ ref**2)
+    out["area-weighted"] = float(np.sqrt(np.maximum(square, 0.0)).max())
     for name in ("lit", "penumbra", "umbra", "contact", "block"):
         rows = ok & (names == name)
         square = ((got - ref) ** 2 - ref_error**2)[rows].mean(0) / (ref**2)[rows].mean(0)
@@ -177,6 +200,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     scene = block_scene()
     points, names = probes(scene, np.random.default_rng(11))
+    weight = area_weights(scene, points, names)
     print("points:", {n: int((names == n).sum()) for n in np.unique(names)})
     ref, ref_error = acc.reference(scene, points, args.paths, args.cache, "block")
     for receivers in args.receivers:
@@ -188,7 +212,7 @@ def main(argv: list[str] | None = None) -> int:
         rows = {}
         for label, baked in (("adaptive", adaptive), ("uniform", uniform)):
             got = radiosity_at(baked.mesh, baked.shown, points.points, points.normals)
-            rows[label] = errors(got, ref, ref_error, names)
+            rows[label] = errors(got, ref, ref_error, names, weight)
         print(
             f"\n--receivers {receivers}: adaptive {adaptive.solved} solved -> "
             f"{adaptive.mesh.receiver_count} baked ({adaptive.seconds:.1f} s); uniform "
@@ -199,6 +223,13 @@ def main(argv: list[str] | None = None) -> int:
         for name in rows["adaptive"]:
             a, u = rows["adaptive"][name], rows["uniform"][name]
             print(f"| {name} | {100 * u:.2f} % | {100 * a:.2f} % | {u / max(a, 1e-12):.2f} |")
+        for label, baked in (("adaptive", adaptive), ("uniform", uniform)):
+            true = rows[label]["area-weighted"]
+            print(
+                f"{label}: reported total error {100 * baked.total_rms.max():.2f} % against "
+                f"the true {100 * true:.2f} % (area-weighted): "
+                f"{baked.total_rms.max() / max(true, 1e-12):.2f} times"
+            )
     return 0
 
 

@@ -217,7 +217,10 @@ def _gathered(
     with ``H_a``, ``H_b`` their estimates, ``H = (H_a + H_b) / 2`` has variance
     ``E[(H_a - H_b)^2] / 4``, unbiased however well stratification works. A point is shut
     in when most of its rays hit the back of single-sided surfaces (as
-    :meth:`~raytrad.core.visibility.Occluder.probe_hemispheres` decides for receivers).
+    :meth:`~raytrad.core.visibility.Occluder.probe_hemispheres` decides for receivers),
+    or when its rays find backs and nothing else: no surface's front sees it, so no light
+    reaches it and none leaves it for another surface (the part of a crate sunk into a
+    floor, below the floor: what it shows is seen by no one in the room).
     """
     side = max(2, int(np.sqrt(rays * 3 // 4)) // 2 * 2)  # strata per axis, even
     light_side = max(2, int(np.sqrt(max(rays - side * side, 4))) // 2 * 2)
@@ -248,8 +251,9 @@ def _gathered(
             halves = _halves(light, n, light_side) + _halves(seen, n, side)  # (n, 2, 3)
             irradiance[part] = halves.mean(axis=1)
             variance[part] = (halves[:, 0] - halves[:, 1]) ** 2 / 4.0
-            back = _back_hits(hit, direction, triangle_normal, twin)
-            shut[part] = back.reshape(n, -1).mean(axis=1) > 0.5
+            back = _back_hits(hit, direction, triangle_normal, twin).reshape(n, -1)
+            front = ((hit >= 0).reshape(n, -1) & ~back).any(axis=1)
+            shut[part] = (back.mean(axis=1) > 0.5) | (back.any(axis=1) & ~front)
     finally:
         occluder.close()
     return irradiance, variance, shut

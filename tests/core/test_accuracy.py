@@ -6,9 +6,16 @@ from collections.abc import Callable
 
 import numpy as np
 
-from raytrad.core.accuracy import ErrorParts, discretisation_error, total_error_column
+from raytrad.core.accuracy import (
+    ErrorParts,
+    _gathered,
+    discretisation_error,
+    total_error_column,
+)
 from raytrad.core.convergence import counted_receivers
+from raytrad.core.mesh import MeshSettings, build_mesh
 from raytrad.core.pipeline import Prepared
+from raytrad.scene.builder import SceneBuilder, rectangle
 
 
 def test_exact_furnace_solution_has_no_residual(prepare_furnace: Callable[..., Prepared]) -> None:
@@ -58,3 +65,32 @@ def test_total_error_column_adds_the_bake_error_to_each_bound() -> None:
     assert all(v is None or v == np.inf for v in column[0])
     np.testing.assert_allclose(column[1], [0.52, 0.53, 0.54])
     np.testing.assert_allclose(column[2], parts.total)
+
+
+def test_points_no_front_sees_are_skipped() -> None:
+    # A block sunk 5 cm into the floor of a closed room: its sides below the floor see the
+    # floor's back and the void beneath, no surface's front; no light reaches them and
+    # none leaves them for anyone in the room. The residual check skips them (they were
+    # a 9.5 times overestimate of a furnished room's error: a point there gathers 0 and
+    # shows the lit value of the floor line above). Points above the floor are kept.
+    builder = SceneBuilder()
+    builder.material("white", 0.7)
+    builder.material("lamp", 0.0, 5.0)
+    builder.room("white", (1.0, 1.0, 1.0))
+    builder.block("white", (0.3, -0.05, 0.3), (0.6, 0.25, 0.6))
+    builder.quad(rectangle(1, 1.0 - 5e-4, (0.3, 0.3), (0.62, 0.62)), "lamp", (0, -1, 0))
+    scene = builder.build()
+    mesh = build_mesh(scene, MeshSettings(receivers=2000))
+    centroid = mesh.positions[mesh.triangles].mean(axis=1)
+    side = (np.abs(mesh.triangle_normal[:, 1]) < 1e-9) & (centroid[:, 0] > 0.29)
+    side &= centroid[:, 0] < 0.61
+    below = np.flatnonzero(side & (centroid[:, 1] < -0.01))
+    above = np.flatnonzero(side & (centroid[:, 1] > 0.01))
+    assert len(below) and len(above)
+    tri = np.concatenate([below, above])
+    weights = np.full((len(tri), 3), 1.0 / 3.0)
+    radiosity = np.ones((mesh.receiver_count, 3))
+    rng = np.random.default_rng(0)
+    _, _, shut = _gathered(scene, mesh, radiosity, tri, weights, 256, rng)
+    assert shut[: len(below)].all()
+    assert not shut[len(below) :].any()
