@@ -1,5 +1,7 @@
-"""Adaptive against uniform refinement where light changes fast: a block on a floor under
-an area light, penumbra and contact shadow, against the path tracer.
+"""Adaptive against uniform refinement in a block's penumbra and contact shadow.
+
+Where light changes fast: a block on a floor under an area light, against the path
+tracer.
 
 The scene (metres, y up): a 3 x 3 m floor (reflectance 0.7), a 0.4 x 0.4 x 0.5 m block
 standing on it, turned by 25 degrees (0.6), and a 0.6 x 0.6 m light 1.5 m up, 0.4 m to
@@ -17,7 +19,7 @@ error squared subtracted from the mean square difference, as in
 Each row bakes adaptively (raytrad's default refinement) at ``--receivers N`` and uniformly
 (``--refine-threshold 0``) at a receiver target chosen so that the uniform mesh has at
 least as many receivers as the adaptive bake ended with (uniform meshes come in steps, so
-the uniform bake may have more); the last column is uniform / adaptive (the issue's
+the uniform bake may have more); the last column is uniform / adaptive (issue 10's
 target: at least 2 in the penumbra and at the contact line). Each bake's reported total
 error (``error.total_rms``) is set against its true error over the area points, weighted
 by the area each stands for.
@@ -194,14 +196,18 @@ def errors(
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--receivers", type=int, nargs="+", default=[2000, 5000])
-    parser.add_argument("--paths", type=int, default=20000)
-    parser.add_argument("--cache", type=Path, default=ROOT / ".cache" / "accuracy")
+    parser.add_argument(
+        "--receivers", type=int, nargs="+", default=[2000, 5000], help="targets to bake at"
+    )
+    parser.add_argument("--paths", type=int, default=20000, help="reference paths a point")
+    parser.add_argument(
+        "--cache", type=Path, default=ROOT / ".cache" / "accuracy", help="reference cache"
+    )
     args = parser.parse_args(argv)
     scene = block_scene()
     points, names = probes(scene, np.random.default_rng(11))
     weight = area_weights(scene, points, names)
-    print("points:", {n: int((names == n).sum()) for n in np.unique(names)})
+    print("points:", ", ".join(f"{n} {int((names == n).sum())}" for n in np.unique(names)))
     ref, ref_error = acc.reference(scene, points, args.paths, args.cache, "block")
     for receivers in args.receivers:
         start = time.perf_counter()

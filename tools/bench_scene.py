@@ -82,10 +82,14 @@ def triangle_probes(scene: Scene, total: int, rng: np.random.Generator) -> acc.P
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--scene", type=Path, default=None, help="a scene file (default: the room)")
-    parser.add_argument("--receivers", type=int, nargs="+", default=[3000, 10000])
-    parser.add_argument("--points", type=int, default=6000)
-    parser.add_argument("--paths", type=int, default=10000)
-    parser.add_argument("--cache", type=Path, default=ROOT / ".cache" / "accuracy")
+    parser.add_argument(
+        "--receivers", type=int, nargs="+", default=[3000, 10000], help="targets to bake at"
+    )
+    parser.add_argument("--points", type=int, default=6000, help="reference points, about")
+    parser.add_argument("--paths", type=int, default=10000, help="reference paths a point")
+    parser.add_argument(
+        "--cache", type=Path, default=ROOT / ".cache" / "accuracy", help="reference cache"
+    )
     args = parser.parse_args(argv)
     if args.scene is None:
         scene, name = furnished_room(), "room"
@@ -101,7 +105,10 @@ def main(argv: list[str] | None = None) -> int:
     count = np.bincount(probes.quad, minlength=len(area))
     weight = area[probes.quad] / count[probes.quad]
     counted = ~emitter[probes.quad] & ~shut & (ref.sum(axis=1) > 0)
-    print(f"{name}: {counted.sum()} points counted of {len(probes.points)}")
+    print(
+        f"{name}: {counted.sum()} of {len(probes.points)} points counted (emitters and points "
+        "no one sees left out)"
+    )
     for receivers in args.receivers:
         baked = acc.bake(scene, receivers)
         got = radiosity_at(baked.mesh, baked.shown, probes.points, probes.normals)

@@ -163,8 +163,9 @@ def build_parser() -> argparse.ArgumentParser:
         default=RefineSettings().threshold,
         metavar="FRACTION",
         help="split elements whose corners' radiosity differs by more than this fraction "
-        "of their level (shadow edges, contact lines), gathering the new receivers; 0 "
-        "turns refinement off (default: %(default)s)",
+        "of their level (shadow edges, contact lines), or where a new receiver's gather "
+        "differed from the interpolation by more than a tenth of it; 0 turns refinement "
+        "off (default: %(default)s)",
     )
     refine.add_argument(
         "--max-receivers",

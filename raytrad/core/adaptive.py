@@ -8,6 +8,9 @@ The new receivers get their radiosity by a final gather over the solve's shootin
 (:meth:`~raytrad.core.formfactor.FormFactorEngine.gather_at`: their own visibility rays,
 the patches' converged radiosity, the near field as it varies across a patch). Shadow
 boundaries, contact lines and the surroundings of lamps are refined; flat regions are not.
+From the second round on, a triangle is also split when a corner the last round added
+gathered far from the interpolation it replaced (:data:`FOUND_SHARE`): the interpolation
+was found wrong there even where the corners agree (the bright edge of a penumbra).
 Rounds repeat until no element exceeds the threshold or the receiver budget is spent.
 
 The patches, their sub-areas and the solved system stay as they are; the existing
@@ -38,6 +41,14 @@ log = logging.getLogger(__name__)
 #: Final-gather passes over the new receivers of a round: the first reads its new
 #: neighbours' interpolated radiosity, the next what they gathered (same factors).
 GATHER_PASSES = 2
+
+#: A triangle is also split when a corner the last round added gathered a luminance that
+#: differs from the interpolation it replaced by more than this share of the threshold
+#: (relative to its level, floored as the spread is): the interpolation was found wrong
+#: there, though the corners may spread little (the bright edge of a penumbra, where the
+#: light bends), and the error of linear interpolation falls about fourfold with each
+#: halving of the triangle.
+FOUND_SHARE = 0.1
 
 #: Luminance weights of linear Rec. 709 RGB, to compare radiosity across channels.
 _LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
@@ -157,6 +168,7 @@ def refine_adaptively(
     patch_radiosity = patch_means(mesh, radiosity)
     smallest = settings.smallest * engine.diagonal
     changes: list[tuple[np.ndarray, np.ndarray]] = []
+    found = np.zeros(mesh.receiver_count)  # see FOUND_SHARE: nothing found before round 1
     for _ in range(settings.rounds):
         if stop is not None and stop():
             if out.rounds:
@@ -168,7 +180,7 @@ def refine_adaptively(
                 log.info("refinement skipped: time limit spent or interrupted")
             break
         room = budget - out.mesh.receiver_count
-        order = _to_split(out.mesh, out.radiosity, settings, smallest, room)
+        order = _to_split(out.mesh, out.radiosity, settings, smallest, room, found)
         refined, parent = out.mesh, np.zeros(0, dtype=np.int64)
         while len(order):  # the closure splits neighbours too: never beyond the budget
             split = np.zeros(len(out.mesh.triangles), dtype=bool)
@@ -196,6 +208,8 @@ def refine_adaptively(
         out.rays += near.rays_cast
         out.rays_naive += near.rays_naive
         changes.append((before - gathered, refined.receiver_area[new]))
+        found = np.concatenate([found, _found(out.mesh, out.radiosity, before, gathered, settings)])
+        found[new[refined.receiver_area[new] == 0]] = 0.0  # hidden: nothing to interpolate
         out.radiosity = np.concatenate([out.radiosity, gathered])
         out.mesh = refined
         out.added += len(new)
@@ -223,13 +237,17 @@ def _to_split(
     settings: RefineSettings,
     smallest: float,
     room: int,
+    found: np.ndarray | None = None,
 ) -> np.ndarray:
-    """The triangles to split this round, worst first, about ``room`` receivers' worth."""
+    """The triangles to split this round, worst first, about ``room`` receivers' worth:
+    those whose corners spread by more than the threshold, or with a corner whose last
+    gather ``found`` ((R,) relative luminance change, see :data:`FOUND_SHARE`) the
+    interpolation wrong."""
     luminance = radiosity @ _LUMINANCE
     visible = mesh.receiver_area > 0
     if room <= 0 or not visible.any():
         return np.zeros(0, dtype=np.int64)
-    level = float(np.average(luminance[visible], weights=mesh.receiver_area[visible]))
+    level = _level(mesh, radiosity)
     if not level > 0.0:  # nothing lit (no emitter): nothing changes fast
         return np.zeros(0, dtype=np.int64)
     corner = luminance[mesh.triangle_receivers]
@@ -239,12 +257,39 @@ def _to_split(
     # base on the floor): what it shows there is a guess, so it is always refined
     straddles = corner_seen.any(axis=1) & ~corner_seen.all(axis=1)
     spread = np.where(straddles, np.inf, np.where(corner_seen.all(axis=1), spread, 0.0))
+    if found is not None and len(found) == len(luminance):
+        wrong = found[mesh.triangle_receivers].max(axis=1) / FOUND_SHARE
+        spread = np.maximum(spread, np.where(corner_seen.all(axis=1), wrong, 0.0))
     corners = mesh.positions[mesh.triangles]
     longest = np.linalg.norm(corners - np.roll(corners, 1, axis=1), axis=2).max(axis=1)
     candidate = (spread > settings.threshold) & (longest > smallest)
     order = np.argsort(-np.where(candidate, spread, -np.inf), kind="stable")
     # each split adds about one receiver per triangle (a midpoint shared by two)
     return order[: min(int(candidate.sum()), max(1, room // 2))]
+
+
+def _level(mesh: RadiosityMesh, radiosity: np.ndarray) -> float:
+    """The scene's area-weighted mean luminance over visible receivers [W m-2]."""
+    visible = mesh.receiver_area > 0
+    if not visible.any():
+        return 0.0
+    luminance = radiosity @ _LUMINANCE
+    return float(np.average(luminance[visible], weights=mesh.receiver_area[visible]))
+
+
+def _found(
+    mesh: RadiosityMesh,
+    radiosity: np.ndarray,
+    before: np.ndarray,
+    gathered: np.ndarray,
+    settings: RefineSettings,
+) -> np.ndarray:
+    """(N,) how far new receivers' gathered luminance is from the interpolation ``before``
+    it replaced, relative to their own, floored at ``settings.floor`` times the level of
+    ``mesh`` and ``radiosity`` (the mesh before the round) [1]."""
+    got = gathered @ _LUMINANCE
+    floor = max(settings.floor * _level(mesh, radiosity), 1e-300)
+    return np.asarray(np.abs(got - before @ _LUMINANCE) / np.maximum(got, floor))
 
 
 def subdivide(mesh: RadiosityMesh, split: np.ndarray) -> tuple[RadiosityMesh, np.ndarray]:

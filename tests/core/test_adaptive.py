@@ -8,7 +8,14 @@ from collections.abc import Callable
 import numpy as np
 import pytest
 
-from raytrad.core.adaptive import Refinement, RefineSettings, refine_adaptively, subdivide
+from raytrad.core.adaptive import (
+    FOUND_SHARE,
+    Refinement,
+    RefineSettings,
+    _to_split,
+    refine_adaptively,
+    subdivide,
+)
 from raytrad.core.formfactor import FormFactorEngine
 from raytrad.core.pipeline import Prepared
 from raytrad.core.solver import SolveResult, SolveSettings, solve
@@ -138,3 +145,25 @@ def test_a_budget_below_the_solved_receivers_says_so(
     prepared, result = cornell_fine
     out = _refine(prepared, result, RefineSettings(max_receivers=prepared.mesh.receiver_count - 10))
     assert out.added == 0 and "no refinement: the receiver budget" in caplog.text
+
+
+def test_a_corner_found_wrong_is_split_though_its_corners_agree(
+    prepare_furnace: Callable[..., Prepared],
+) -> None:
+    # Uniform radiosity: no triangle's corners spread. A receiver whose last gather
+    # differed from the interpolation by 2 % (above FOUND_SHARE x the threshold, 1 %) has
+    # its triangles split; one found 0.5 % off does not.
+    mesh = prepare_furnace(0.5, 1.0).mesh
+    radiosity = np.full((mesh.receiver_count, 3), 2.0)
+    settings = RefineSettings()
+    assert settings.threshold * FOUND_SHARE == pytest.approx(0.01)
+    room = mesh.receiver_count
+    assert len(_to_split(mesh, radiosity, settings, 0.0, room)) == 0
+    for change, expected in ((0.02, True), (0.005, False)):
+        found = np.zeros(mesh.receiver_count)
+        found[7] = change
+        split = _to_split(mesh, radiosity, settings, 0.0, room, found)
+        around = np.flatnonzero((mesh.triangle_receivers == 7).any(axis=1))
+        assert bool(len(split)) is expected
+        if expected:
+            assert set(split.tolist()) == set(around.tolist())
