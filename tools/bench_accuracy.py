@@ -161,10 +161,16 @@ def shut_in(scene: Scene, probes: Probes, rays: int = 256) -> np.ndarray:
 
 
 def reference(
-    scene: Scene, probes: Probes, paths: int, cache: Path, name: str = "cornell"
+    scene: Scene,
+    probes: Probes,
+    paths: int,
+    cache: Path,
+    name: str = "cornell",
+    triangle: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """(N, 3) path-traced radiosity [W m-2] at the probes and its standard error, cached
-    by content."""
+    by content. Each probe's material is its scene ``triangle``'s (default: the first
+    triangle of its quad, ``2 * probes.quad``)."""
     key = hashlib.sha256(
         probes.points.tobytes() + probes.normals.tobytes() + str(paths).encode()
     ).hexdigest()[:16]
@@ -174,9 +180,10 @@ def reference(
         return cached["radiosity"], cached["error"]
     start = time.perf_counter()
     irradiance, error = path_traced_radiosity(scene, probes.points, probes.normals, paths, seed=1)
-    quad_material = scene.material_index[0::2][probes.quad]
-    rho = scene.material_reflectance[quad_material]
-    emitted = scene.material_emitted_exitance[quad_material]
+    owner = 2 * probes.quad if triangle is None else triangle
+    material = scene.material_index[owner]
+    rho = scene.material_reflectance[material]
+    emitted = scene.material_emitted_exitance[material]
     radiosity = emitted + rho * irradiance
     cache.mkdir(parents=True, exist_ok=True)
     np.savez(path, radiosity=radiosity, error=rho * error)

@@ -21,9 +21,7 @@ more than 10 %, and the reported total error (``error.total_rms``) against that 
 from __future__ import annotations
 
 import argparse
-import hashlib
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
@@ -34,7 +32,6 @@ sys.path.insert(0, str(ROOT / "tools"))
 
 import bench_accuracy as acc  # noqa: E402
 
-from raytrad.core.pathtrace import path_traced_radiosity  # noqa: E402
 from raytrad.products.probe import radiosity_at  # noqa: E402
 from raytrad.scene import Scene, triangle_areas_normals  # noqa: E402
 from raytrad.scene.builder import SceneBuilder, rectangle  # noqa: E402
@@ -99,7 +96,7 @@ def main(argv: list[str] | None = None) -> int:
         scene, name = api.load(args.scene).scene, args.scene.stem
     probes = triangle_probes(scene, args.points, np.random.default_rng(13))
     emitter = (scene.material_emitted_exitance[scene.material_index] > 0).any(axis=1)
-    ref, ref_error = reference(scene, probes, args.paths, args.cache, name)
+    ref, ref_error = acc.reference(scene, probes, args.paths, args.cache, name, probes.quad)
     shut = acc.shut_in(scene, probes)
     area = triangle_areas_normals(scene.triangle_vertices())[0]
     count = np.bincount(probes.quad, minlength=len(area))
@@ -139,32 +136,6 @@ def main(argv: list[str] | None = None) -> int:
             f"{100 * baked.parts.discretisation.max():.2f} %)"
         )
     return 0
-
-
-def reference(
-    scene: Scene, probes: acc.Probes, paths: int, cache: Path, name: str
-) -> tuple[np.ndarray, np.ndarray]:
-    """The path-traced radiosity at the points and its standard error, from each point's
-    own triangle's material (``probes.quad`` holds triangles here), cached by content."""
-    key = hashlib.sha256(
-        probes.points.tobytes() + probes.normals.tobytes() + str(paths).encode()
-    ).hexdigest()[:16]
-    path = cache / f"{name}-{key}.npz"
-    if path.exists():
-        cached = np.load(path)
-        return cached["radiosity"], cached["error"]
-    start = time.perf_counter()
-    irradiance, error = path_traced_radiosity(scene, probes.points, probes.normals, paths, seed=1)
-    material = scene.material_index[probes.quad]
-    rho = scene.material_reflectance[material]
-    radiosity = scene.material_emitted_exitance[material] + rho * irradiance
-    cache.mkdir(parents=True, exist_ok=True)
-    np.savez(path, radiosity=radiosity, error=rho * error)
-    print(
-        f"reference: {len(probes.points)} points x {paths} paths in "
-        f"{time.perf_counter() - start:.0f} s"
-    )
-    return radiosity, rho * error
 
 
 if __name__ == "__main__":

@@ -209,6 +209,7 @@ def _wait_for_lock(folder: Path, process: subprocess.Popen[bytes], seconds: floa
     raise AssertionError(f"no job started in {folder}")
 
 
+@pytest.mark.slow  # about 45 s: two bakes, one killed, one stopped and resumed
 @POSIX
 def test_a_killed_pool_worker_is_retried_and_a_sigterm_bake_resumes(tmp_path: Path) -> None:
     """kill -9 of a job's process: the job is retried and completes. SIGTERM to the bake:

@@ -96,12 +96,14 @@ def _sides_across(mesh: RadiosityMesh, level: float) -> int:
     return int(((y.max(axis=1) > level + 1e-7) & (y.min(axis=1) < level - 1e-7)).sum())
 
 
-def test_a_sunk_block_and_the_floor_are_imprinted_on_each_other() -> None:
-    # A block sunk 2 cm into the floor: the line where its sides pass through the floor is
-    # no triangle's edge (intersections.py finds it). No floor triangle straddles the
-    # footprint and no side triangle the floor's plane; without the imprint dozens do.
+@pytest.mark.parametrize("two_sided", [False, True], ids=["one", "two"])
+def test_a_sunk_block_and_the_floor_are_imprinted_on_each_other(two_sided: bool) -> None:
+    # A block sunk 2 cm into the floor (one- or double-sided, whose reversed copy crosses
+    # the block too): the line where its sides pass through the floor is no triangle's
+    # edge (intersections.py finds it). No floor triangle straddles the footprint and no
+    # side triangle the floor's plane; without the imprint dozens do.
     lo, hi = FOOTPRINT
-    scene = _block_on_floor(lo, hi, -0.02)
+    scene = _block_on_floor(lo, hi, -0.02, two_sided)
     for receivers in (3000, 12000):
         plain = build_mesh(scene, MeshSettings(receivers=receivers, imprint=False))
         mesh = build_mesh(scene, MeshSettings(receivers=receivers))
