@@ -43,6 +43,10 @@ log = logging.getLogger(__name__)
 #: Seconds between the form-factor pass's progress lines.
 PASS_LOG_SECONDS = 10.0
 
+#: Columns finished after the first before the pass's progress line says how long is left
+#: (a quarter of the pass, if that is fewer).
+PASS_RATE_COLUMNS = 16
+
 
 @dataclass
 class Prepared:
@@ -224,7 +228,9 @@ def _pass_progress() -> Callable[[int, int], None]:
 
     The rate is measured from the first column's end: the first column also pays for
     compiling the kernels on a first run (several seconds), which would inflate the
-    estimate many times over."""
+    estimate many times over. Columns finish in bursts (one a thread), so no time is
+    promised until :data:`PASS_RATE_COLUMNS` more have finished: two columns finishing
+    together would say "about 0 s left"."""
     start = last = time.perf_counter()
     first = start
 
@@ -235,6 +241,14 @@ def _pass_progress() -> Callable[[int, int], None]:
             first = now
         if now - last >= PASS_LOG_SECONDS and 1 < done < total:
             last = now
+            if done - 1 < min(PASS_RATE_COLUMNS, total // 4):
+                log.info(
+                    "form factors: %d of %d columns to compute in %.0f s, time left not known yet",
+                    done,
+                    total,
+                    now - start,
+                )
+                return
             left = (now - first) / (done - 1) * (total - done)
             log.info(
                 "form factors: %d of %d columns to compute in %.0f s, about %.0f s left",

@@ -7,10 +7,12 @@ from __future__ import annotations
 import dataclasses
 import logging
 import time
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
 
+from raytrad.core import pipeline
 from raytrad.core.mesh import MeshSettings
 from raytrad.core.pipeline import RunBudget, prepare
 from raytrad.core.solver import SolveSettings, solve
@@ -126,3 +128,25 @@ def test_run_budget_counts_from_the_run_start() -> None:
     assert RunBudget(10.0, start=time.perf_counter() - 11.0)()
     assert RunBudget(None, stop=lambda: True)()
     assert RunBudget(None).solve_settings(SolveSettings(), 0.0).time_limit is None
+
+
+def test_the_pass_promises_no_time_left_from_a_burst(
+    caplog: pytest.LogCaptureFixture, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # Columns finish in bursts, one a thread: two finishing together used to print "about
+    # 0 s left" at the start of a 541-column pass. No time is given until enough columns
+    # have finished; then the rate since the first column's end.
+    clock = iter([0.0, 13.0, 13.0, 20.0, 31.0])  # start, column 1, column 2, 17, 41
+    monkeypatch.setattr(pipeline, "time", SimpleNamespace(perf_counter=lambda: next(clock)))
+    monkeypatch.setattr(pipeline, "PASS_LOG_SECONDS", 0.0)
+    report = pipeline._pass_progress()
+    with caplog.at_level(logging.INFO, logger="raytrad.core.pipeline"):
+        report(1, 541)
+        report(2, 541)
+        report(17, 541)
+        report(41, 541)
+    lines = [r.getMessage() for r in caplog.records]
+    assert lines[0] == "form factors: 2 of 541 columns to compute in 13 s, time left not known yet"
+    # 16 columns in 7 s after the first: 524 left take 229 s
+    assert lines[1] == "form factors: 17 of 541 columns to compute in 20 s, about 229 s left"
+    assert lines[2].endswith("about 225 s left")  # 40 columns in 18 s: 500 left
