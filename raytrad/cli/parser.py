@@ -358,8 +358,10 @@ def _add_common(parser: argparse.ArgumentParser, default_tolerance: float) -> No
         type=int,
         default=defaults.receivers,
         metavar="N",
-        help="target receiver (vertex) count; the mesh is refined to reach it "
-        "(default: %(default)s)",
+        help="target receiver (vertex) count: it sets the longest edge from the scene's "
+        "area, and edges halve in steps and receivers split at creases, so meshes "
+        "usually get 15-60%% more (the summary and report.json say how many; "
+        "default: %(default)s)",
     )
     add(
         "--max-edge",
