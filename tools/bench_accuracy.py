@@ -71,6 +71,33 @@ def quad_corners(scene: Scene) -> np.ndarray:
     return np.concatenate([tri[0::2], tri[1::2][:, 2:3]], axis=1)
 
 
+def on_triangles(corners: np.ndarray, s: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """(N, 3) points on triangles (N, 3, 3) from (N,) uniforms in the unit square, by
+    Shirley's area-preserving map ``(1 - sqrt(s)) a + sqrt(s) (1 - t) b + sqrt(s) t c``:
+    uniform in, uniform out, and stratified squares give stratified triangles."""
+    root = np.sqrt(s)[:, None]
+    return (
+        (1 - root) * corners[:, 0]
+        + root * (1 - t[:, None]) * corners[:, 1]
+        + root * t[:, None] * corners[:, 2]
+    )
+
+
+def denoised_rms(
+    got: np.ndarray, ref: np.ndarray, ref_error: np.ndarray, weight: np.ndarray
+) -> float:
+    """Worst channel's relative RMS of ``got - ref`` (N, 3) over points weighted by
+    ``weight`` (N,), with the reference's variance (``ref_error`` squared, its standard
+    error) taken out of the mean square: the difference's mean square is the bake's
+    squared error plus the reference's variance. Points of weight 0 do not count (their
+    ``got`` may be NaN)."""
+    counted = weight > 0
+    diff = np.where(counted[:, None], got - ref, 0.0)
+    w = np.where(counted, weight, 0.0)
+    square = (w @ (diff**2 - ref_error**2)) / (w @ ref**2)
+    return float(np.sqrt(np.maximum(square, 0.0)).max())
+
+
 def area_probes(scene: Scene, per_quad: int, rng: np.random.Generator) -> Probes:
     """``per_quad`` area-uniform points on every quad (the light excluded), stratified.
 
@@ -94,11 +121,7 @@ def area_probes(scene: Scene, per_quad: int, rng: np.random.Generator) -> Probes
         split = areas[2 * q] / (areas[2 * q] + areas[2 * q + 1])
         second = s >= split
         s = np.where(second, (s - split) / (1.0 - split), s / split)
-        c = corners[2 * q + second.astype(int)]
-        root = np.sqrt(s)[:, None]
-        points.append(
-            (1 - root) * c[:, 0] + root * (1 - t[:, None]) * c[:, 1] + root * t[:, None] * c[:, 2]
-        )
+        points.append(on_triangles(corners[2 * q + second.astype(int)], s, t))
         probe_normals.append(normals[2 * q + second.astype(int)])
         quads.append(np.full(side * side, q))
     return Probes(
@@ -275,8 +298,7 @@ def report(
     count = np.bincount(probes.quad[shown], minlength=len(quad_area))
     weight = np.where(shown, quad_area[probes.quad] / np.maximum(count[probes.quad], 1), 0.0)
     weighted = float(np.sqrt((weight @ (got - ref) ** 2) / (weight @ ref**2)).max())
-    square = (weight @ ((got - ref) ** 2 - ref_error**2)) / (weight @ ref**2)
-    denoised = float(np.sqrt(np.maximum(square, 0.0)).max())
+    denoised = denoised_rms(got, ref, ref_error, weight)
     off = (np.abs(rel) > 0.1).any(axis=1)
     out = {
         "worst surface": means[worst],

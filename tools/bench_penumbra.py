@@ -179,18 +179,11 @@ def errors(
     """Relative RMS per class, the reference's noise taken out (worst channel); and
     ``area-weighted``, over every area point weighted by the area it stands for, as
     raytrad's reported total error is measured."""
-    out = {}
     ok = ~np.isnan(got).any(axis=1) & (ref.sum(axis=1) > 0)
-    w = np.where(ok & (weight > 0), weight, 0.0)
-    square = (w @ ((np.where(ok[:, None], got, 0.0) - ref) ** 2 - ref_error**2)) / (w @ ref**2)
-    out["area-weighted"] = float(np.sqrt(np.maximum(square, 0.0)).max())
+    out = {"area-weighted": acc.denoised_rms(got, ref, ref_error, np.where(ok, weight, 0.0))}
     for name in ("lit", "penumbra", "umbra", "contact", "block"):
-        rows = ok & (names == name)
-        square = ((got - ref) ** 2 - ref_error**2)[rows].mean(0) / (ref**2)[rows].mean(0)
-        out[name] = float(np.sqrt(np.maximum(square, 0.0)).max())
-    rows = ok & (names != "contact")
-    square = ((got - ref) ** 2 - ref_error**2)[rows].mean(0) / (ref**2)[rows].mean(0)
-    out["all"] = float(np.sqrt(np.maximum(square, 0.0)).max())
+        out[name] = acc.denoised_rms(got, ref, ref_error, (ok & (names == name)).astype(float))
+    out["all"] = acc.denoised_rms(got, ref, ref_error, (ok & (names != "contact")).astype(float))
     return out
 
 

@@ -70,9 +70,7 @@ def triangle_probes(scene: Scene, total: int, rng: np.random.Generator) -> acc.P
     cell = np.arange(len(tri)) - np.repeat(np.cumsum(count) - count, count)
     s = (cell // side[tri] + rng.random(len(tri))) / side[tri]
     t = (cell % side[tri] + rng.random(len(tri))) / side[tri]
-    c = corners[tri]
-    root = np.sqrt(s)[:, None]
-    points = (1 - root) * c[:, 0] + root * (1 - t[:, None]) * c[:, 1] + root * t[:, None] * c[:, 2]
+    points = acc.on_triangles(corners[tri], s, t)
     return acc.Probes(points, normal[tri], tri, np.full(len(tri), np.inf))
 
 
@@ -111,9 +109,7 @@ def main(argv: list[str] | None = None) -> int:
         got = radiosity_at(baked.mesh, baked.shown, probes.points, probes.normals)
         ok = counted & ~np.isnan(got).any(axis=1)
         w = np.where(ok, weight, 0.0)
-        diff = np.where(ok[:, None], got, 0.0) - ref
-        square = (w @ (diff**2 - ref_error**2)) / (w @ ref**2)
-        true = float(np.sqrt(np.maximum(square, 0.0)).max())
+        true = acc.denoised_rms(got, ref, ref_error, w)
         lit = ref > 1e-3 * ref.max(axis=0)
         rel = np.where(lit, np.where(ok[:, None], got, 0.0) / np.where(lit, ref, 1) - 1, 0.0)
         off = float(w @ (np.abs(rel) > 0.1).any(axis=1) / w.sum())
