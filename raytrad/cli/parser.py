@@ -164,7 +164,7 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="FRACTION",
         help="split elements whose corners' radiosity differs by more than this fraction "
         "of their level (shadow edges, contact lines), or where a new receiver's gather "
-        "differed from the interpolation by more than a tenth of it; 0 turns refinement "
+        "differed from the interpolation by more than 3%% of it; 0 turns refinement "
         "off (default: %(default)s)",
     )
     refine.add_argument(

@@ -11,6 +11,7 @@ from typing import Any
 import numpy as np
 
 from raytrad.constants import FLOAT32_MAX, defaults
+from raytrad.core.hidden import fill_hidden
 from raytrad.core.pipeline import Prepared
 from raytrad.core.solver import SolveResult
 from raytrad.errors import SolverError
@@ -19,7 +20,7 @@ from raytrad.formats.ply import write_radiosity_ply
 from raytrad.outputs.gltf import baked_parts, write_baked_glb
 from raytrad.outputs.lightmaps import write_lightmaps
 from raytrad.outputs.run_manifest import invalidate
-from raytrad.products.display import auto_exposure, display_colors, display_encode, fill_hidden
+from raytrad.products.display import auto_exposure, display_colors, display_encode
 from raytrad.products.framing import image_view
 from raytrad.products.image import render_radiance, seen_receivers
 from raytrad.products.lightmap import Lightmap, bake_lightmaps

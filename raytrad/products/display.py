@@ -1,5 +1,5 @@
-"""What is shown of a solve: exposure, tone mapping and display encoding of radiosity, and
-the radiosity shown where the solve hid receivers.
+"""What is shown of a solve: exposure, tone mapping and display encoding of radiosity (the
+radiosity shown where the solve hid receivers is :func:`raytrad.core.hidden.fill_hidden`).
 
 These decide how radiance becomes 8-bit display values for every product (PLY colours,
 lightmap previews, camera images, glTF colours). The colour arithmetic they use, luminance
@@ -13,7 +13,6 @@ import math
 
 import numpy as np
 
-from raytrad.core.mesh import RadiosityMesh
 from raytrad.errors import SettingsError
 from raytrad.formats import images
 from raytrad.scene.colorimetry import LUMINANCE_WEIGHTS, srgb_encode
@@ -132,51 +131,3 @@ def _aces_view() -> str:
     if not sdr:
         raise SettingsError("this OpenImageIO build has no ACES view for an sRGB display")
     return sdr[0]
-
-
-def fill_hidden(mesh: RadiosityMesh, radiosity: np.ndarray, rings: int = 64) -> np.ndarray:
-    """Radiosity for display, with hidden receivers given their visible neighbours' mean.
-
-    A hidden receiver (under a block standing on the floor, see
-    :func:`raytrad.core.mesh.hide_receivers`) keeps only its own emission in the solve,
-    but the triangles joining it to visible receivers are partly visible: interpolating
-    toward its value would draw a dark saw-tooth rim along the block's base in images and
-    lightmaps. Filling it from its edge neighbours on the same surface (receivers are split
-    at creases and material changes), ring by ring inward, removes that rim; what no one
-    sees is unchanged.
-
-    Parameters
-    ----------
-    mesh : RadiosityMesh
-    radiosity : (R, 3) float [W m-2]
-    rings : int
-        Most rings of hidden receivers filled inward from the visible ones.
-
-    Returns
-    -------
-    (R, 3) float64 [W m-2]
-        ``radiosity`` where visible (and where no visible receiver is within ``rings``).
-    """
-    out = np.array(radiosity, dtype=np.float64)
-    if mesh.receiver_visible is None:
-        return out
-    known = np.asarray(mesh.receiver_visible, dtype=bool).copy()
-    tri = mesh.triangle_receivers
-    a = np.concatenate([tri[:, 0], tri[:, 1], tri[:, 2], tri[:, 1], tri[:, 2], tri[:, 0]])
-    b = np.concatenate([tri[:, 1], tri[:, 2], tri[:, 0], tri[:, 0], tri[:, 1], tri[:, 2]])
-    a, b = np.unique(np.column_stack([a, b]), axis=0).T  # each neighbour once
-    count = len(out)
-    for _ in range(rings):
-        todo = ~known
-        if not todo.any():
-            break
-        use = known[b] & todo[a]
-        if not use.any():
-            break
-        total = np.zeros_like(out)
-        np.add.at(total, a[use], out[b[use]])
-        seen = np.bincount(a[use], minlength=count)
-        ring = seen > 0
-        out[ring] = total[ring] / seen[ring, None]
-        known |= ring
-    return out

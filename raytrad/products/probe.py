@@ -24,7 +24,7 @@ def radiosity_at(
     ----------
     mesh : RadiosityMesh
     radiosity : (R, 3) float [W m-2]
-        Per receiver (the shown radiosity, see :func:`raytrad.products.display.fill_hidden`).
+        Per receiver (the shown radiosity, see :func:`raytrad.core.hidden.fill_hidden`).
     points : (N, 3) float
         Points on the mesh's surfaces [m].
     normals : (N, 3) float

@@ -9,12 +9,15 @@ import numpy as np
 from raytrad.core.accuracy import (
     ErrorParts,
     _gathered,
+    _spread,
+    _surface_samples,
     discretisation_error,
     total_error_column,
 )
 from raytrad.core.convergence import counted_receivers
-from raytrad.core.mesh import MeshSettings, build_mesh
+from raytrad.core.mesh import MeshSettings, RadiosityMesh, build_mesh
 from raytrad.core.pipeline import Prepared
+from raytrad.core.solver import SolveSettings, solve
 from raytrad.scene.builder import SceneBuilder, rectangle
 
 
@@ -29,10 +32,10 @@ def test_exact_furnace_solution_has_no_residual(prepare_furnace: Callable[..., P
     )
     assert residual.samples == 1024
     assert (residual.residual < 0.005).all()
-    # what is reported is one standard error of that subtraction, amplified: the noise
-    # floor of the check (every wall here is an emitter, sampled by area: noisy near
-    # the box's edges), which keeps the estimate on the safe side
-    assert (residual.error < 0.06).all()
+    # what is reported is STANDARD_ERRORS standard errors of that subtraction,
+    # amplified: the noise floor of the check (every wall here is an emitter, sampled by
+    # area: noisy near the box's edges), which keeps the estimate on the safe side
+    assert (residual.error < 0.07).all()
     np.testing.assert_allclose(residual.gain, 2.0)
 
 
@@ -94,3 +97,81 @@ def test_points_no_front_sees_are_skipped() -> None:
     _, _, shut = _gathered(scene, mesh, radiosity, tri, weights, 256, rng)
     assert shut[: len(below)].all()
     assert not shut[len(below) :].any()
+
+
+def _bump(mesh: RadiosityMesh, size: float) -> tuple[np.ndarray, np.ndarray]:
+    """(R,) bool: receivers of receiver 0's surface within ``size`` of it, and the (T,)
+    bool triangles they touch."""
+    normal = mesh.receiver_normal[0]
+    same = np.abs(mesh.receiver_normal @ normal - 1.0) < 1e-9
+    near = np.linalg.norm(mesh.receiver_position - mesh.receiver_position[0], axis=1) < size
+    bump = same & near
+    return bump, bump[mesh.triangle_receivers].any(axis=1)
+
+
+def test_points_go_where_the_light_changes_and_are_weighted_back(
+    prepare_furnace: Callable[..., Prepared],
+) -> None:
+    # A bright spot on one wall: half the points are drawn by area times the corners'
+    # squared spread, so the triangles around it get far more than their area's share;
+    # each point's share (area density over sampling density) undoes that, so the
+    # weighted count of points in any set of triangles estimates its area.
+    mesh = prepare_furnace(0.5, 1.0).mesh
+    radiosity = np.full((mesh.receiver_count, 3), 2.0)
+    bump, touched = _bump(mesh, 0.05)
+    radiosity[bump] = 3.0
+    norm = np.full(3, 2.0)
+    usable = mesh.triangle_area > 0
+    tri, weights, share = _surface_samples(
+        mesh, usable, _spread(mesh, radiosity, norm), 20000, np.random.default_rng(1)
+    )
+    np.testing.assert_allclose(weights.sum(axis=1), 1.0)
+    area_share = mesh.triangle_area[touched].sum() / mesh.triangle_area.sum()
+    drawn = touched[tri].mean()
+    assert drawn > 20 * area_share
+    weighted = share @ touched[tri] / share.sum()
+    np.testing.assert_allclose(weighted, area_share, rtol=0.1)
+
+
+def test_an_error_confined_to_a_spot_is_found_at_every_seed(
+    prepare_scene: Callable[..., Prepared],
+) -> None:
+    # An open floor under a small lamp, solved: its light is smooth, so the bake is
+    # nearly exact and the check's gather nearly noise-free (direct light, stratified).
+    # One floor receiver shown twice as bright is then the error (a vertex gathered
+    # wrong), its RMS exact from the linear elements' mass matrix. Its triangles are
+    # 0.15 % of the floor: area-uniform points would miss them in most draws of 256;
+    # drawn by spread, every seed finds them and reports no less than the error and at
+    # most three times it.
+    builder = SceneBuilder()
+    builder.material("floor", 0.5)
+    builder.material("lamp", 0.0, 10.0)
+    builder.quad(rectangle(1, 0.0, (0.0, 0.0), (1.0, 1.0)), "floor", (0, 1, 0))
+    builder.quad(rectangle(1, 1.0, (0.4, 0.4), (0.6, 0.6)), "lamp", (0, -1, 0))
+    prepared = prepare_scene(builder.build(), MeshSettings(receivers=1500))
+    mesh = prepared.mesh
+    baked = solve(mesh, prepared.engine, SolveSettings()).radiosity
+    floor = mesh.receiver_normal[:, 1] > 0.5
+    centre = np.flatnonzero(floor)[
+        np.argmin(np.linalg.norm(mesh.receiver_position[floor] - [0.3, 0.0, 0.7], axis=1))
+    ]
+    spot = np.arange(mesh.receiver_count) == centre
+    radiosity = baked.copy()
+    radiosity[spot] *= 2.0
+    counted = counted_receivers(mesh)
+    usable = counted[mesh.triangle_receivers].all(axis=1)
+    error = (radiosity - baked)[:, 1]
+    corner = error[mesh.triangle_receivers]  # (T, 3)
+    mean_square = (corner.sum(axis=1) ** 2 + (corner**2).sum(axis=1)) / 12.0  # over each
+    area = mesh.receiver_area * counted
+    norm = np.sqrt(area @ radiosity[:, 1] ** 2 / area.sum())
+    weight = mesh.triangle_area * usable
+    truth = float(np.sqrt(weight @ mean_square / weight.sum()) / norm)
+    touched = spot[mesh.triangle_receivers].any(axis=1)
+    assert weight[touched].sum() < 0.002 * weight.sum()
+    for seed in range(4):
+        residual = discretisation_error(
+            prepared.scene, mesh, radiosity, counted, 0.0, samples=256, rays=256, seed=seed
+        )
+        assert residual.error[1] >= truth
+        assert residual.error[1] <= 3.0 * truth

@@ -11,12 +11,12 @@ import numpy as np
 import pytest
 
 from raytrad import api
+from raytrad.core.hidden import fill_hidden
 from raytrad.core.imprint import outline_segments
 from raytrad.core.mesh import MeshSettings, RadiosityMesh, build_mesh
 from raytrad.core.pipeline import Prepared
 from raytrad.core.refine import surface_labels
 from raytrad.core.solver import SolveResult
-from raytrad.products.display import fill_hidden
 from raytrad.products.probe import hemisphere_gather, radiosity_at
 from raytrad.scene import Scene, triangle_areas_normals
 from raytrad.scene.builder import SceneBuilder, box_faces, rectangle

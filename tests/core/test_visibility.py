@@ -12,10 +12,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from raytrad.core.hidden import fill_hidden
 from raytrad.core.pipeline import Prepared
 from raytrad.core.solver import SolveResult
 from raytrad.core.visibility import COVER_GAP, Occluder
-from raytrad.products.display import fill_hidden
 from raytrad.products.probe import hemisphere_gather, radiosity_at
 from raytrad.scene import Scene, triangle_areas_normals
 from raytrad.scene.builder import SceneBuilder, rectangle

@@ -13,10 +13,10 @@ import numpy as np
 import pytest
 
 from raytrad import api
+from raytrad.core.hidden import fill_hidden
 from raytrad.core.mesh import MeshSettings, build_mesh
 from raytrad.errors import SettingsError
 from raytrad.formats.images import read_attributes, read_image
-from raytrad.products.display import fill_hidden
 from raytrad.products.framing import file_camera, framing_camera, image_view
 from raytrad.products.image import render_radiance
 from raytrad.scene import Camera, NamedCamera, Scene

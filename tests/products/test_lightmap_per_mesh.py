@@ -15,13 +15,13 @@ import numpy as np
 import pytest
 
 from raytrad import api
+from raytrad.core.hidden import fill_hidden
 from raytrad.core.mesh import MeshSettings, RadiosityMesh, build_mesh
 from raytrad.core.pipeline import Prepared
 from raytrad.core.solver import SolveResult
 from raytrad.errors import SceneError, SettingsError
 from raytrad.formats.images import read_attributes, read_image
 from raytrad.outputs.gltf import BakedPart, write_baked_glb
-from raytrad.products.display import fill_hidden
 from raytrad.products.lightmap import (
     Lightmap,
     LightmapSettings,
