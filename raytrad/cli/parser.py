@@ -164,7 +164,8 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="FRACTION",
         help="split elements whose corners' radiosity differs by more than this fraction "
         "of their level (shadow edges, contact lines), or where a new receiver's gather "
-        "differed from the interpolation by more than 3%% of it; 0 turns refinement "
+        "differed from the interpolation by more than 3%% of this fraction of its own "
+        "value (0.3%% at 0.1); 0 turns refinement "
         "off (default: %(default)s)",
     )
     refine.add_argument(

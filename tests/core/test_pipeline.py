@@ -5,6 +5,7 @@ budget cuts the pass short)."""
 from __future__ import annotations
 
 import dataclasses
+import itertools
 import logging
 import time
 from types import SimpleNamespace
@@ -14,7 +15,7 @@ import pytest
 
 from raytrad.core import pipeline
 from raytrad.core.mesh import MeshSettings
-from raytrad.core.pipeline import RunBudget, prepare
+from raytrad.core.pipeline import RunBudget, error_samples, prepare
 from raytrad.core.solver import SolveSettings, solve
 from raytrad.scene import has_emission
 from raytrad.scene.builtin import cornell_box, furnace_box
@@ -150,3 +151,14 @@ def test_the_pass_promises_no_time_left_from_a_burst(
     # 16 columns in 7 s after the first: 524 left take 229 s
     assert lines[1] == "form factors: 17 of 541 columns to compute in 20 s, about 229 s left"
     assert lines[2].endswith("about 225 s left")  # 40 columns in 18 s: 500 left
+
+
+def test_the_residual_check_grows_with_the_bake_then_trades_points_for_rays() -> None:
+    # a quarter of the receivers, 256 to 2048 points of 1024 rays; past twice the cap,
+    # half the points with twice the rays (the error is small against a point's noise)
+    assert error_samples(500) == (256, 1024)
+    assert error_samples(4000) == (1000, 1024)
+    assert error_samples(12000) == (2048, 1024)
+    assert error_samples(26000) == (1024, 2048)
+    cost = [np.prod(error_samples(r)) for r in range(1000, 60000, 500)]
+    assert all(b >= a for a, b in itertools.pairwise(cost))
