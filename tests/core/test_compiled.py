@@ -154,3 +154,16 @@ def test_numpy_kernels_on_request(monkeypatch):
     np.testing.assert_array_equal(
         kernels.polygon_form_factor(tri, x, n), kernels.numpy_polygon_form_factor(tri, x, n)
     )
+
+
+@pytest.mark.parametrize("n", [0, 1, 2, 3, 4, 13, 14, 40, 41, 500])
+def test_the_gather_sort_agrees_with_numpy(n):
+    # sum_shares sorts each pair's sources with its own loop instead of np.sort (whose
+    # compilation took seconds of a first run): the same order, duplicates and a tail
+    # beyond n left alone
+    rng = np.random.default_rng(n)
+    values = rng.integers(0, max(n, 1) * 3 + 1, size=n + 7).astype(np.int64)
+    got = values.copy()
+    compiled.get()._sort_ascending(got, n)
+    np.testing.assert_array_equal(got[:n], np.sort(values[:n]))
+    np.testing.assert_array_equal(got[n:], values[n:])
