@@ -147,9 +147,9 @@ def contact_probes(scene: Scene, along: int, first_side: int = 6) -> Probes:
     for q in range(len(quads)):
         if abs(normals[q] @ floor_normal) > 1e-6 or q < first_side:
             continue  # not a vertical block side
-        bottom = quads[q][np.argsort(quads[q][:, 1])[:2]]
+        a, b = _bottom_edge(quads[q])
         t = (np.arange(along) + 0.5) / along
-        line = bottom[0] + t[:, None] * (bottom[1] - bottom[0])
+        line = a + t[:, None] * (b - a)
         for d in CONTACT_DISTANCES:
             points += [line + d * normals[q], line + d * floor_normal]
             probe_normals += [np.tile(floor_normal, (along, 1)), np.tile(normals[q], (along, 1))]
