@@ -10,6 +10,7 @@ module                      holds
 :mod:`.mesh`                receivers, patches, sub-areas (:class:`RadiosityMesh`)
 :mod:`.visibility`          the embreex adapter (:class:`Occluder`)
 :mod:`.kernels`             closed-form point-to-area form factors
+:mod:`.contour`             a patch's exact factor from its outline
 :mod:`.formfactor`          the vertex-to-patch form-factor engine and balancing
 :mod:`.pipeline`            scene + mesh settings -> :class:`Prepared`
 :mod:`.solver`              shooting methods (the registry) and the solve

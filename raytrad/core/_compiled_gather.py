@@ -12,7 +12,13 @@ import math
 import numpy as np
 
 #: Every function to compile, each after the helpers it calls.
-KERNELS = ("_triangle_corner_weights", "subarea_spread", "_sort_ascending", "sum_shares")
+KERNELS = (
+    "_triangle_corner_weights",
+    "subarea_spread",
+    "_sort_ascending",
+    "sum_shares",
+    "gather_sums",
+)
 
 
 def _triangle_corner_weights(corners, normal, x, nx, rule, rule_weight, out):
@@ -194,3 +200,20 @@ def sum_shares(pair, source, weight, pairs):
         count += used
         out_pointer[p + 1] = count
     return out_pointer, out_source[:count].copy(), out_weight[:count].copy()
+
+
+def gather_sums(pointer, sources, weights, radiosity):
+    """(G, 3) weighted sums of ``radiosity`` rows per near receiver (CSR ``pointer`` into
+    ``sources`` and ``weights``; :meth:`raytrad.core.gather.GatherWeights.gathered`)."""
+    count = len(pointer) - 1
+    out = np.zeros((count, 3))
+    for g in range(count):
+        s0 = s1 = s2 = 0.0
+        for k in range(pointer[g], pointer[g + 1]):
+            w = float(weights[k])
+            b = radiosity[sources[k]]
+            s0 += w * b[0]
+            s1 += w * b[1]
+            s2 += w * b[2]
+        out[g, 0], out[g, 1], out[g, 2] = s0, s1, s2
+    return out

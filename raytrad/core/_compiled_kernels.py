@@ -20,8 +20,10 @@ KERNELS = (
     "clipped_factor",
     "polygon_form_factor",
     "contour_form_factor",
+    "clipped_outline",
+    "clipped_contour_form_factor",
+    "piecewise_contour_form_factor",
     "linear_corner_shares",
-    "facing_triangle_sums",
     "sample_weights",
     "_segment",
     "visibility_rays",
@@ -116,6 +118,65 @@ def contour_form_factor(start, end, points, normals):
     return out
 
 
+def clipped_outline(start, end, lo, hi, x, n):
+    """Lambert's formula over the planar outline ``start[lo:hi] -> end[lo:hi]`` clipped
+    to the receiver's horizon: kept parts of the edges, and the cuts along the horizon as
+    the entries' terms from the first crossing less the exits' (see
+    :mod:`raytrad.core.contour`)."""
+    total = 0.0
+    cuts = 0.0
+    found = False
+    ox = oy = oz = 0.0
+    for e in range(lo, hi):
+        ux, uy, uz = start[e, 0] - x[0], start[e, 1] - x[1], start[e, 2] - x[2]
+        vx, vy, vz = end[e, 0] - x[0], end[e, 1] - x[1], end[e, 2] - x[2]
+        hu = ux * n[0] + uy * n[1] + uz * n[2]
+        hv = vx * n[0] + vy * n[1] + vz * n[2]
+        in_u, in_v = hu >= 0.0, hv >= 0.0
+        if in_u and in_v:
+            total += edge_term(ux, uy, uz, vx, vy, vz, n)
+            continue
+        if not (in_u or in_v):
+            continue
+        t = hu / (hu - hv)
+        px, py, pz = ux + t * (vx - ux), uy + t * (vy - uy), uz + t * (vz - uz)
+        if not found:
+            ox, oy, oz = px, py, pz
+            found = True
+        if in_u:  # leaves the half-space at p
+            total += edge_term(ux, uy, uz, px, py, pz, n)
+            cuts -= edge_term(ox, oy, oz, px, py, pz, n)
+        else:  # comes back at p
+            total += edge_term(px, py, pz, vx, vy, vz, n)
+            cuts += edge_term(ox, oy, oz, px, py, pz, n)
+    return abs(total + cuts) / (2.0 * math.pi)
+
+
+def clipped_contour_form_factor(start, end, points, normals):
+    out = np.empty(len(points))
+    for i in range(len(points)):
+        out[i] = clipped_outline(start, end, 0, len(start), points[i], normals[i])
+    return out
+
+
+def piecewise_contour_form_factor(
+    start, end, edge_ptr, piece_point, piece_normal, points, normals, margin
+):
+    """Sum over planar pieces facing each receiver by more than ``margin`` of their
+    clipped outlines' factors (a folded patch, see :mod:`raytrad.core.contour`)."""
+    out = np.zeros(len(points))
+    for i in range(len(points)):
+        x, n = points[i], normals[i]
+        total = 0.0
+        for k in range(len(piece_point)):
+            c, m = piece_point[k], piece_normal[k]
+            front = (x[0] - c[0]) * m[0] + (x[1] - c[1]) * m[1] + (x[2] - c[2]) * m[2]
+            if front > margin:
+                total += clipped_outline(start, end, edge_ptr[k], edge_ptr[k + 1], x, n)
+        out[i] = total
+    return out
+
+
 def linear_corner_shares(triangles, points, normals, bary, centroids):
     out = np.empty((len(triangles), 3))
     part = np.empty((3, 3))
@@ -141,25 +202,6 @@ def linear_corner_shares(triangles, points, normals, bary, centroids):
             out[i, 0], out[i, 1], out[i, 2] = s0 / total, s1 / total, s2 / total
         else:
             out[i, 0] = out[i, 1] = out[i, 2] = 1.0 / 3.0
-    return out
-
-
-def facing_triangle_sums(points, normals, corners, triangle_normals, margin):
-    """Sum over every triangle of the exact clipped factor from each receiver, counting
-    only triangles whose lit side faces it by more than ``margin`` (the straddling-patch
-    sum of :meth:`raytrad.core.formfactor.FormFactorEngine._unoccluded`)."""
-    out = np.zeros(len(points))
-    work = np.empty((4, 3))
-    for i in range(len(points)):
-        x, n = points[i], normals[i]
-        total = 0.0
-        for t in range(len(corners)):
-            c = corners[t]
-            m = triangle_normals[t]
-            front = (x[0] - c[0, 0]) * m[0] + (x[1] - c[0, 1]) * m[1] + (x[2] - c[0, 2]) * m[2]
-            if front > margin:
-                total += clipped_factor(c, x, n, work)
-        out[i] = total
     return out
 
 

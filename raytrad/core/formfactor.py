@@ -440,12 +440,15 @@ class FormFactorEngine:
         )
         keep = factors > 0
         gather = gather.subset(keep[gather.receivers])
-        gather = GatherWeights(  # compact, as the columns (see Column)
-            candidates[gather.receivers].astype(self._index),
-            factors[gather.receivers],
-            gather.pointer,
-            gather.sources.astype(self._index),
-            gather.weights.astype(np.float32),
+        gather = _compact(
+            GatherWeights(
+                candidates[gather.receivers],
+                factors[gather.receivers],
+                gather.pointer,
+                gather.sources,
+                gather.weights,
+            ),
+            self._index,
         )
         return Column(
             candidates[keep].astype(self._index), factors[keep].astype(np.float32), rays, gather
@@ -515,7 +518,7 @@ class FormFactorEngine:
             self.rays_cast += rays
             factors = factors * self._col_scale[patch]
             rows.row_sum[near] += factors
-            rows.patches.append((patch, near, factors, gather))
+            rows.patches.append((patch, near, factors, _compact(gather, self._index)))
         return rows
 
     def factors_at(self, points: np.ndarray, normals: np.ndarray, patch: int) -> np.ndarray:
@@ -567,6 +570,19 @@ class FormFactorEngine:
             sum(p[1] for p in parts),
             join_gathers([p[2] for p in parts], [a for a, _ in spans]),
         )
+
+
+def _compact(gather: GatherWeights, index: type) -> GatherWeights:
+    """Gather weights as the columns keep them (see :class:`~raytrad.core.columns.Column`):
+    receiver indices as ``index``, shares as float32 (each near receiver's still sum to
+    1 within float32 rounding; the solve conserves power separately)."""
+    return GatherWeights(
+        gather.receivers.astype(index),
+        gather.factors,
+        gather.pointer.astype(np.int64),
+        gather.sources.astype(index),
+        gather.weights.astype(np.float32),
+    )
 
 
 def receiver_points(mesh: RadiosityMesh, offset: float) -> tuple[np.ndarray, np.ndarray]:

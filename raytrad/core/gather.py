@@ -64,10 +64,28 @@ class GatherWeights:
     weights: np.ndarray
 
     def gathered(self, radiosity: np.ndarray) -> np.ndarray:
-        """(G, 3) radiosity each near receiver sees on the patch [W m-2]."""
-        values = self.weights[:, None] * radiosity[self.sources]
-        sums = np.cumsum(np.vstack([np.zeros((1, 3)), values]), axis=0)
-        return np.asarray(sums[self.pointer[1:]] - sums[self.pointer[:-1]])
+        """(G, 3) radiosity each near receiver sees on the patch [W m-2], from the (R, 3)
+        receiver ``radiosity``; compiled when available (see :meth:`numpy_gathered`)."""
+        fast = compiled.get()
+        if fast is None:
+            return self.numpy_gathered(radiosity)
+        return np.asarray(
+            fast.gather_sums(
+                self.pointer, self.sources, self.weights, np.ascontiguousarray(radiosity, float)
+            )
+        )
+
+    def numpy_gathered(self, radiosity: np.ndarray) -> np.ndarray:
+        """The reference of :meth:`gathered`: ``sum_k g_jpk B_k`` per near receiver, each
+        row summed in order (as the compiled loop; a running sum over all rows would
+        carry the other rows' rounding)."""
+        owner = np.repeat(np.arange(len(self.receivers)), np.diff(self.pointer))
+        values = self.weights.astype(np.float64)[:, None] * radiosity[self.sources]
+        count = len(self.receivers)
+        return np.stack(
+            [np.bincount(owner, weights=values[:, k], minlength=count) for k in range(3)],
+            axis=1,
+        )
 
     def subset(self, keep: np.ndarray) -> GatherWeights:
         """Only the near receivers where ``keep`` ((G,) bool) holds."""

@@ -4,8 +4,8 @@
   differential-to-area factor;
 * :func:`polygon_form_factor`: the exact unoccluded point-to-polygon factor (Lambert's
   formula; Baum, Rushmeier and Winget 1989), clipped to the receiver's horizon;
-* :func:`contour_form_factor`: Lambert's formula over the boundary edges of a planar
-  surface (interior edges cancel).
+* :func:`edge_sum`: Lambert's formula over given edges (the outline sums of
+  :mod:`raytrad.core.contour` build on it).
 
 Clipping at the horizon needs no tolerance: Lambert's formula is continuous as a corner
 crosses the receiver's plane, so a corner at +-1e-17 m gives the same factor either way.
@@ -13,9 +13,9 @@ Choosing a ray *target* is not continuous (the centroid of the whole triangle or
 clipped part), so :func:`visible_centroid` counts heights within ``tol.horizon`` of the
 pair's size as on the horizon (:func:`horizon_heights`).
 
-:func:`polygon_form_factor`, :func:`contour_form_factor` and
-:func:`linear_corner_shares` run compiled (:mod:`raytrad.core.compiled`, numba) when it
-is available; their ``numpy_`` twins here are the reference the tests compare them with.
+:func:`polygon_form_factor` and :func:`linear_corner_shares` run compiled
+(:mod:`raytrad.core.compiled`, numba) when it is available; their ``numpy_`` twins here
+are the reference the tests compare them with.
 """
 
 from __future__ import annotations
@@ -259,6 +259,31 @@ def _lambert(polygons: np.ndarray, points: np.ndarray, normals: np.ndarray) -> n
     return edge_sum(d, np.roll(d, -1, axis=1), normals)
 
 
+def edge_terms(u: np.ndarray, v: np.ndarray, normals: np.ndarray) -> np.ndarray:
+    """(N, E) signed terms ``gamma n.(u x v) / |u x v|`` of Lambert's formula, one per edge.
+
+    Parameters
+    ----------
+    u, v : (N, E, 3) float64
+        Vectors from each receiver to the start and end of each edge [m].
+    normals : (N, 3) float64
+        Receiver unit normals.
+
+    Returns
+    -------
+    (N, E) float64 [rad]; 0 for an edge through the receiver. For points on one straight
+    line that misses the receiver the terms add up: ``term(a, b) + term(b, c) =
+    term(a, c)`` (a signed angle).
+    """
+    u = u / np.maximum(np.linalg.norm(u, axis=2), 1e-300)[:, :, None]
+    v = v / np.maximum(np.linalg.norm(v, axis=2), 1e-300)[:, :, None]
+    cross = np.cross(u, v)
+    sin = np.linalg.norm(cross, axis=2)
+    gamma = np.arctan2(sin, np.einsum("nej,nej->ne", u, v))
+    projected = np.einsum("nej,nj->ne", cross, normals) / np.where(sin > 0, sin, 1.0)
+    return np.where(sin > 0, gamma * projected, 0.0)
+
+
 def edge_sum(u: np.ndarray, v: np.ndarray, normals: np.ndarray) -> np.ndarray:
     """|sum over edges of gamma n.(u x v)/|u x v|| / (2 pi): Lambert's formula.
 
@@ -273,65 +298,7 @@ def edge_sum(u: np.ndarray, v: np.ndarray, normals: np.ndarray) -> np.ndarray:
     -------
     (N,) float64 form factors [1]; an edge through the receiver contributes nothing.
     """
-    u = u / np.maximum(np.linalg.norm(u, axis=2), 1e-300)[:, :, None]
-    v = v / np.maximum(np.linalg.norm(v, axis=2), 1e-300)[:, :, None]
-    cross = np.cross(u, v)
-    sin = np.linalg.norm(cross, axis=2)
-    gamma = np.arctan2(sin, np.einsum("nej,nej->ne", u, v))
-    projected = np.einsum("nej,nj->ne", cross, normals) / np.where(sin > 0, sin, 1.0)
-    total = np.where(sin > 0, gamma * projected, 0.0).sum(axis=1)
-    return np.abs(total) / (2.0 * math.pi)
-
-
-def contour_form_factor(
-    start: np.ndarray, end: np.ndarray, points: np.ndarray, normals: np.ndarray
-) -> np.ndarray:
-    """Lambert's formula over a boundary contour, compiled when available (see
-    :func:`numpy_contour_form_factor`, the reference)."""
-    fast = compiled.get()
-    if fast is None:
-        return numpy_contour_form_factor(start, end, points, normals)
-    return fast.contour_form_factor(_f64(start), _f64(end), _f64(points), _f64(normals))
-
-
-def numpy_contour_form_factor(
-    start: np.ndarray, end: np.ndarray, points: np.ndarray, normals: np.ndarray
-) -> np.ndarray:
-    """Lambert's formula summed over the boundary edges of a surface.
-
-    Parameters
-    ----------
-    start, end : (E, 3) float64
-        Oriented boundary edges of one surface [m], wholly above every receiver's horizon.
-    points : (C, 3) float64
-        Receiver positions [m].
-    normals : (C, 3) float64
-        Receiver unit normals.
-
-    Returns
-    -------
-    (C,) float64 unoccluded form factors [1].
-    """
-    return edge_sum(
-        start[None, :, :] - points[:, None, :], end[None, :, :] - points[:, None, :], normals
-    )
-
-
-def facing_triangle_sums(
-    points: np.ndarray,
-    normals: np.ndarray,
-    corners: np.ndarray,
-    triangle_normals: np.ndarray,
-    margin: float,
-) -> np.ndarray:
-    """Exact unoccluded factor from each receiver to a set of triangles, compiled when
-    available (see :func:`numpy_facing_triangle_sums`, the reference)."""
-    fast = compiled.get()
-    if fast is None:
-        return numpy_facing_triangle_sums(points, normals, corners, triangle_normals, margin)
-    return fast.facing_triangle_sums(
-        _f64(points), _f64(normals), _f64(corners), _f64(triangle_normals), float(margin)
-    )
+    return np.abs(edge_terms(u, v, normals).sum(axis=1)) / (2.0 * math.pi)
 
 
 def numpy_facing_triangle_sums(
@@ -341,7 +308,9 @@ def numpy_facing_triangle_sums(
     triangle_normals: np.ndarray,
     margin: float,
 ) -> np.ndarray:
-    """Sum over triangles of the exact horizon-clipped factor from each receiver.
+    """Sum over triangles of the exact horizon-clipped factor from each receiver: the
+    triangle-by-triangle truth the outline sums of :mod:`raytrad.core.contour` are
+    tested against (the pass no longer computes it: its cost grew with refinement).
 
     A triangle counts only where its lit side faces the receiver by more than ``margin``
     (a one-sided triangle seen from behind gives nothing).

@@ -3,6 +3,8 @@
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from raytrad.constants import tol
@@ -23,29 +25,86 @@ def patch_vertices(mesh: RadiosityMesh) -> tuple[np.ndarray, np.ndarray]:
     return key[:, 1], np.searchsorted(key[:, 0], np.arange(mesh.patch_count + 1))
 
 
-def boundary_edges(mesh: RadiosityMesh) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def boundary_edges(
+    mesh: RadiosityMesh, labels: np.ndarray | None = None, count: int | None = None
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Oriented boundary edges of each patch: edges used by one of its triangles only.
 
     Consecutive collinear boundary edges are merged (Lambert's sum is additive along a
     straight edge), so a refined rectangular patch has 4 edges however fine its triangles.
 
+    Parameters
+    ----------
+    mesh : RadiosityMesh
+    labels, count : (T,) int64 and int, optional
+        Other groups of triangles to outline instead of the patches (label -1: none).
+
     Returns
     -------
     start, end : (E, 3) float64, edge endpoints [m], in the winding of their triangle
-    pointer : (P + 1,) int64, CSR pointers by patch
+    pointer : (P + 1,) int64, CSR pointers by patch (by label)
     """
-    tri = mesh.triangles
+    if labels is None:
+        labels, count = mesh.triangle_patch, mesh.patch_count
+    assert count is not None
+    tri = mesh.triangles[labels >= 0]
     a = tri.reshape(-1)
     b = np.roll(tri, -1, axis=1).reshape(-1)
-    patch = np.repeat(mesh.triangle_patch, 3)
+    patch = np.repeat(labels[labels >= 0], 3)
     key = np.stack([patch, np.minimum(a, b), np.maximum(a, b)], axis=1)
     _, inverse, counts = np.unique(key, axis=0, return_inverse=True, return_counts=True)
     single = counts[inverse.reshape(-1)] == 1
     order = np.argsort(patch[single], kind="stable")
     a, b, patch = a[single][order], b[single][order], patch[single][order]
     a, b, patch = _merge_collinear(mesh.positions, a, b, patch)
-    pointer = np.searchsorted(patch, np.arange(mesh.patch_count + 1))
+    pointer = np.searchsorted(patch, np.arange(count + 1))
     return mesh.positions[a], mesh.positions[b], pointer
+
+
+@dataclass(frozen=True)
+class Pieces:
+    """The planar pieces of folded patches (a warped quad's two triangles), each outlined.
+
+    Attributes
+    ----------
+    start, end : (E, 3) float64
+        Pieces' oriented boundary edges [m].
+    edge_ptr : (K + 1,) int64
+        CSR pointers into the edges by piece.
+    point, normal : (K, 3) float64
+        A corner of each piece [m] and its unit normal.
+    patch_ptr : (P + 1,) int64
+        CSR pointers into the pieces by patch (none for planar patches).
+    """
+
+    start: np.ndarray
+    end: np.ndarray
+    edge_ptr: np.ndarray
+    point: np.ndarray
+    normal: np.ndarray
+    patch_ptr: np.ndarray
+
+
+def folded_pieces(mesh: RadiosityMesh) -> Pieces:
+    """Each folded patch's triangles grouped by the scene triangle they refine (one plane
+    each), with the pieces' outlines (:func:`boundary_edges`)."""
+    folded = ~np.asarray(mesh.patch_planar, bool)[mesh.triangle_patch]
+    key = mesh.triangle_patch * (int(mesh.triangle_source.max(initial=0)) + 1)
+    key = key + mesh.triangle_source
+    unique, first, inverse = np.unique(key[folded], return_index=True, return_inverse=True)
+    labels = np.full(len(key), -1, np.int64)
+    labels[folded] = inverse.reshape(-1)
+    start, end, edge_ptr = boundary_edges(mesh, labels, len(unique))
+    own = np.flatnonzero(folded)[first]  # a triangle of each piece
+    piece_patch = mesh.triangle_patch[own]
+    return Pieces(
+        start,
+        end,
+        edge_ptr,
+        mesh.positions[mesh.triangles[own, 0]],
+        mesh.triangle_normal[own],
+        np.searchsorted(piece_patch, np.arange(mesh.patch_count + 1)),
+    )
 
 
 def _merge_collinear(
@@ -94,4 +153,4 @@ def _merge_collinear(
     return a[keep], b[jump[keep]], patch[keep]
 
 
-__all__ = ["boundary_edges", "group", "patch_vertices"]
+__all__ = ["Pieces", "boundary_edges", "folded_pieces", "group", "patch_vertices"]

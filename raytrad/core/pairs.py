@@ -1,13 +1,14 @@
 """Form factors of (receiver, patch) pairs, one chunk of receivers at a time.
 
-The unoccluded factor is exact (Lambert's formula over the patch's outline, or triangle by
-triangle where the patch straddles the receiver's horizon); visibility scales it by the
-visible fraction of the patch seen through its sub-area sample points, each weighted by
-its disk-approximation factor, or, for sub-areas nearer than :data:`NEAR_FACTOR` sizes,
-through each of their triangles weighted exactly. For receivers near the patch the same
-samples say where on the patch the visible factor comes from (the near-field gather
-weights, :mod:`raytrad.core.gather`). The per-pair loops run compiled
-(:mod:`raytrad.core.kernels`, :mod:`raytrad.core.compiled`).
+The unoccluded factor is exact (Lambert's formula over the patch's outline, clipped to a
+receiver's horizon where the patch straddles it, :mod:`raytrad.core.contour`);
+visibility scales it by the visible fraction of the patch seen through its sub-area
+sample points, each weighted by its disk-approximation factor, or, for sub-areas nearer
+than :data:`NEAR_FACTOR` sizes, through each of their triangles weighted exactly. For
+receivers near the patch the same samples say where on the patch the visible factor
+comes from (the near-field gather weights, :mod:`raytrad.core.gather`). The per-pair
+loops run compiled (:mod:`raytrad.core.kernels`, :mod:`raytrad.core.contour`,
+:mod:`raytrad.core.compiled`).
 """
 
 from __future__ import annotations
@@ -20,6 +21,11 @@ import numpy as np
 
 from raytrad.constants import tol
 from raytrad.core import compiled
+from raytrad.core.contour import (
+    clipped_contour_form_factor,
+    contour_form_factor,
+    piecewise_contour_form_factor,
+)
 from raytrad.core.gather import (
     EMPTY,
     GATHER_RADII,
@@ -28,8 +34,6 @@ from raytrad.core.gather import (
     corner_form_factors,
 )
 from raytrad.core.kernels import (
-    contour_form_factor,
-    facing_triangle_sums,
     linear_corner_shares,
     polygon_form_factor,
     sample_weights,
@@ -37,7 +41,7 @@ from raytrad.core.kernels import (
     visible_centroid,
 )
 from raytrad.core.mesh import RadiosityMesh
-from raytrad.core.outline import boundary_edges, group, patch_vertices
+from raytrad.core.outline import boundary_edges, folded_pieces, patch_vertices
 from raytrad.core.shafts import Facets, facets
 from raytrad.core.visibility import Occluder
 
@@ -81,6 +85,7 @@ class PairFactors:
         self._sub_target = mesh.subarea_point + tol.ray_offset * diagonal * mesh.subarea_normal
         self._vert_index, self._vert_ptr = patch_vertices(mesh)
         self._edge_start, self._edge_end, self._edge_ptr = boundary_edges(mesh)
+        self._pieces = folded_pieces(mesh)
         #: Rays an unclassified caster would cast: (receiver, patch) pairs that see each
         #: other x the patch's sample points (the naive count shaft culling is set against).
         self.naive_rays = 0
@@ -113,7 +118,6 @@ class PairFactors:
             mesh.triangle_subarea[order], np.arange(mesh.subarea_count + 1)
         )
         self._tri_corners = mesh.positions[mesh.triangles]
-        self._patch_tri, self._patch_tri_ptr = group(mesh.triangle_patch, mesh.patch_count)
         self._shares = GatherShares(mesh, self._sub_tri, self._sub_ptr)
 
     def refined(self, mesh: RadiosityMesh) -> PairFactors:
@@ -288,40 +292,41 @@ class PairFactors:
     def _unoccluded(self, x: np.ndarray, nx: np.ndarray, patch: int) -> np.ndarray:
         """Exact unoccluded F(receiver <- patch).
 
-        Where a planar patch lies wholly above the receiver's horizon, Lambert's formula is
-        a sum over the patch's boundary edges alone (interior edges cancel); otherwise each
-        triangle facing the receiver is clipped to the horizon and summed.
+        A planar patch's factor is a sum over its boundary edges alone (interior edges
+        cancel): the whole outline where the patch lies above the receiver's horizon, the
+        outline clipped to the horizon where it straddles it
+        (:mod:`raytrad.core.contour`). A folded patch (a warped quad's two triangles)
+        goes triangle by triangle: seen from a receiver on it, the contour sum would
+        count the fold's own surface as a full hemisphere.
         """
         m = self.mesh
-        lo, hi = self._vert_ptr[patch], self._vert_ptr[patch + 1]
-        verts = m.positions[self._vert_index[lo:hi]]
+        a, b = self._edge_ptr[patch], self._edge_ptr[patch + 1]
+        planar = bool(m.patch_planar[patch])
+        if planar:  # a plane's heights are extreme at its outline's corners
+            verts = self._edge_start[a:b]
+        else:
+            verts = m.positions[self._vert_index[self._vert_ptr[patch] : self._vert_ptr[patch + 1]]]
         height = verts @ nx.T - np.einsum("cj,cj->c", x, nx)[None, :]  # (Vp, C)
         band = tol.horizon * self.diagonal
         top = height.max(axis=0)
-        # The boundary-contour sum is exact only for a planar patch: seen from a receiver
-        # on a folded patch (a warped quad's two triangles) it would count the fold's own
-        # surface as a full hemisphere. Folded patches go triangle by triangle.
-        above = (height.min(axis=0) >= -band) & (top > band) & bool(m.patch_planar[patch])
-        if m.patch_planar[patch]:  # nothing reaches the back of a one-sided patch
+        above = (height.min(axis=0) >= -band) & (top > band) & planar
+        if planar:  # nothing reaches the back of a one-sided patch
             facing = (x - m.patch_center[patch]) @ m.patch_normal[patch] > band
             above &= facing
             top = np.where(facing, top, -np.inf)
         out = np.zeros(len(x))
         if above.any():
-            a, b = self._edge_ptr[patch], self._edge_ptr[patch + 1]
             out[above] = contour_form_factor(
                 self._edge_start[a:b], self._edge_end[a:b], x[above], nx[above]
             )
         straddle = ~above & (top > band)
-        if straddle.any():
-            ta, tb = self._patch_tri_ptr[patch], self._patch_tri_ptr[patch + 1]
-            tris = self._patch_tri[ta:tb]
-            out[straddle] = facing_triangle_sums(
-                x[straddle],
-                nx[straddle],
-                self._tri_corners[tris],
-                m.triangle_normal[tris],
-                tol.horizon * self.diagonal,
+        if straddle.any() and planar:
+            out[straddle] = clipped_contour_form_factor(
+                self._edge_start[a:b], self._edge_end[a:b], x[straddle], nx[straddle]
+            )
+        elif straddle.any():
+            out[straddle] = piecewise_contour_form_factor(
+                self._pieces, patch, x[straddle], nx[straddle], band
             )
         return out
 

@@ -72,21 +72,6 @@ def test_polygon_form_factor_agrees_with_numpy():
     assert (want > 0).sum() > len(tri) // 3  # the cases are not all trivially zero
 
 
-def test_contour_form_factor_agrees_with_numpy():
-    rng = np.random.default_rng(2)
-    # an L-shaped planar patch outline (6 boundary edges) and receivers all around it,
-    # some in its plane and some on its boundary
-    outline = np.array([[0, 0, 0], [2, 0, 0], [2, 0, 1], [1, 0, 1], [1, 0, 2], [0, 0, 2.0]])
-    start, end = outline, np.roll(outline, -1, axis=0)
-    x = rng.normal(size=(3000, 3))
-    x[:300, 1] = 0.0
-    x[300:400] = outline[rng.integers(0, 6, 100)]
-    n = _unit(rng.normal(size=(3000, 3)))
-    got = kernels.contour_form_factor(start, end, x, n)
-    want = kernels.numpy_contour_form_factor(start, end, x, n)
-    np.testing.assert_allclose(got, want, rtol=0, atol=AGREE)
-
-
 @pytest.mark.parametrize("levels", [2, 3])
 def test_linear_corner_shares_agree_with_numpy(levels):
     tri, x, n = adversarial_pairs(np.random.default_rng(3), 1600)
@@ -100,17 +85,6 @@ def test_linear_corner_shares_agree_with_numpy(levels):
     seen = kernels.numpy_polygon_form_factor(tri, x, n) > 1e-3
     assert seen.sum() > len(tri) // 4
     np.testing.assert_allclose(got[seen], want[seen], rtol=0, atol=AGREE)
-
-
-def test_facing_triangle_sums_agree_with_numpy():
-    tri, x, n = adversarial_pairs(np.random.default_rng(4), 240)
-    with np.errstate(invalid="ignore"):
-        normals = _unit(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]))
-    normals = np.where(np.isfinite(normals), normals, 0.0)  # degenerate: face nowhere
-    got = kernels.facing_triangle_sums(x, n, tri, normals, 1e-9)
-    want = kernels.numpy_facing_triangle_sums(x, n, tri, normals, 1e-9)
-    np.testing.assert_allclose(got, want, rtol=0, atol=AGREE * len(tri))
-    assert (want > 0).mean() > 0.5
 
 
 def test_sample_weights_agree_with_numpy():

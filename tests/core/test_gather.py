@@ -9,6 +9,7 @@ patches, form factors or gather weights.
 
 from __future__ import annotations
 
+import itertools
 from collections.abc import Callable
 
 import numpy as np
@@ -18,6 +19,7 @@ from raytrad.core import compiled
 from raytrad.core.formfactor import receiver_points
 from raytrad.core.gather import (
     GatherShares,
+    GatherWeights,
     corner_form_factors,
     numpy_subarea_spread,
     numpy_sum_shares,
@@ -165,6 +167,31 @@ def test_compiled_share_sums_match_numpy() -> None:
     k = np.flatnonzero(fast[1][fast[0][7] : fast[0][8]] == 3)[0] + fast[0][7]
     mask = (pair == 7) & (source == 3)
     assert fast[2][k] == pytest.approx(weight[mask].sum() / sums[7], rel=1e-12)
+
+
+@pytest.mark.parametrize("compact", [False, True])
+def test_gathered_sums_each_near_receivers_shares(compact: bool) -> None:
+    """Compiled (when available) and numpy gathers against a plain loop, on empty rows,
+    one crowded row and compact (int32, float32) weights as the columns keep them."""
+    rng = np.random.default_rng(12)
+    counts = rng.integers(0, 9, 200)
+    counts[:5] = 0
+    counts[7] = 400
+    pointer = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
+    sources = rng.integers(0, 1000, pointer[-1])
+    weights = rng.random(pointer[-1])
+    if compact:
+        sources, weights = sources.astype(np.int32), weights.astype(np.float32)
+    gather = GatherWeights(np.arange(200), rng.random(200), pointer, sources, weights)
+    radiosity = rng.random((1000, 3)) * 10.0
+    want = np.array(
+        [
+            sum((float(weights[k]) * radiosity[sources[k]] for k in range(a, b)), np.zeros(3))
+            for a, b in itertools.pairwise(pointer)
+        ]
+    )
+    np.testing.assert_allclose(gather.numpy_gathered(radiosity), want, rtol=1e-14, atol=0)
+    np.testing.assert_array_equal(gather.gathered(radiosity), gather.numpy_gathered(radiosity))
 
 
 @pytest.mark.skipif(compiled.get() is None, reason="numba is not installed")
