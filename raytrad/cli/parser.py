@@ -431,7 +431,8 @@ def _add_common(parser: argparse.ArgumentParser, default_tolerance: float) -> No
         type=float,
         default=RenderSettings().cache_mb,
         metavar="MIB",
-        help="memory for reusing form factors between shots of a patch (default: %(default)s)",
+        help="memory for reusing form factors (and their near-field gather weights) between "
+        "shots of a patch; the rest go to temporary files (default: %(default)s)",
     )
     add(
         "--checkpoint-every",

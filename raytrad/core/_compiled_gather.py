@@ -66,12 +66,11 @@ def subarea_spread(
     sub_point,
     sub_reach,
     src_ptr,
-    src,
-    src_share,
+    base,
     rule,
     rule_weight,
 ):
-    """Sub-area elements' weights on their receivers
+    """Sub-area elements' weights on their receivers, a far one's on its sub-area's mean
     (:func:`raytrad.core.gather.numpy_subarea_spread`; far elements first, then near
     ones, each in element order)."""
     n = len(subareas)
@@ -84,7 +83,7 @@ def subarea_spread(
         dz = points[p, 2] - sub_point[s, 2]
         far[a] = math.sqrt(dx * dx + dy * dy + dz * dz) > sub_reach[s]
         if far[a]:
-            count += src_ptr[s + 1] - src_ptr[s]
+            count += 1 if src_ptr[s + 1] > src_ptr[s] else 0
         else:
             count += 3 * (sub_ptr[s + 1] - sub_ptr[s])
     out_pair = np.empty(count, dtype=np.int64)
@@ -92,13 +91,12 @@ def subarea_spread(
     out_weight = np.empty(count)
     i = 0
     for a in range(n):
-        if far[a]:
-            s = subareas[a]
-            for q in range(src_ptr[s], src_ptr[s + 1]):
-                out_pair[i] = sub_pair[a]
-                out_source[i] = src[q]
-                out_weight[i] = sub_weight[a] * src_share[q]
-                i += 1
+        s = subareas[a]
+        if far[a] and src_ptr[s + 1] > src_ptr[s]:  # the sub-area's mean
+            out_pair[i] = sub_pair[a]
+            out_source[i] = base + s
+            out_weight[i] = sub_weight[a]
+            i += 1
     raw = np.empty(3)
     for a in range(n):
         if far[a]:

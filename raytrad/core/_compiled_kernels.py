@@ -433,11 +433,18 @@ def shoot(
     entry_patch,
     patch_radiosity,
     scratch,
+    sub_lo,
+    sub_hi,
+    mean_ptr,
+    mean_receivers,
+    mean_shares,
+    base,
 ):
     """One shot through a cached column, in place (see
     :func:`raytrad.core.solver.numpy_shoot`, the reference, for the steps). Returns the
     power caught by the receivers, the power they reflect ((3,) each, [W]) and
-    ``sum_j a_j F_jp`` [m2]."""
+    ``sum_j a_j F_jp`` [m2]. The patch's sub-areas ``sub_lo:sub_hi`` get the means of
+    its receivers' shots at ``scratch[base + s]`` (their CSR ``mean_*``)."""
     n = len(entries)
     own = np.empty((n, 3))
     mean = np.zeros(3)
@@ -461,6 +468,10 @@ def shoot(
             received[r, c] = factors[r] * amount[c]
     near_count = len(near_receivers)
     if near_count:
+        for s in range(sub_lo, sub_hi):
+            for q in range(mean_ptr[s], mean_ptr[s + 1]):
+                for c in range(3):
+                    scratch[base + s, c] += mean_shares[q] * scratch[mean_receivers[q], c]
         near = np.empty(near_count, dtype=np.int64)
         r = 0
         for g in range(near_count):  # both ascending
@@ -499,6 +510,9 @@ def shoot(
             k = entry_receiver[entries[i]]
             for c in range(3):
                 scratch[k, c] = 0.0
+        for s in range(sub_lo, sub_hi):
+            for c in range(3):
+                scratch[base + s, c] = 0.0
     else:
         for i in range(n):
             k = entry_receiver[entries[i]]

@@ -2,9 +2,11 @@
 cache, and packed flat for a checkpoint.
 
 A column holds F(receiver <- patch) for the receivers that see one patch, compactly
-(int32 receivers, float32 raw factors: 8 bytes an entry). The engine
-(:class:`~raytrad.core.formfactor.FormFactorEngine`) caches columns up to ``--cache-mb``;
-the rest go to :class:`ColumnSpill`, one small ``.npz`` file each in a temporary folder
+(int32 receivers, float32 raw factors: 8 bytes an entry) and its near receivers' gather
+weights (int32 sources, float32 shares). The engine
+(:class:`~raytrad.core.formfactor.FormFactorEngine`) caches columns, weights included, up
+to ``--cache-mb``; the rest go to :class:`ColumnSpill`, one small ``.npz`` file each in a
+temporary folder
 (honours ``TMPDIR``), and are read back when a patch shoots again: reading a column back
 takes milliseconds where tracing it again took a good fraction of a second, so a scene
 whose columns outgrow the cache no longer slows the solve down by orders of magnitude.
@@ -54,13 +56,16 @@ class Column:
 
     @property
     def nbytes(self) -> int:
-        """Memory the cache counts for the column [bytes]: its receivers and factors (the
-        near-field gather weights are kept apart, whether the column is cached or not)."""
-        return int(self.receivers.nbytes + self.factors.nbytes + 64)
+        """Memory the cache counts for the column [bytes]: its receivers, factors and
+        near-field gather weights."""
+        g = self.gather
+        arrays = (g.receivers, g.factors, g.pointer, g.sources, g.weights)
+        return int(self.receivers.nbytes + self.factors.nbytes + sum(a.nbytes for a in arrays))
 
 
 class ColumnSpill:
-    """Columns that did not fit the cache, one temporary file each.
+    """Columns that did not fit the cache, one temporary file each, with their near-field
+    gather weights (so that ``--cache-mb`` bounds both).
 
     The folder is made on the first write and removed by :meth:`close`. When a file cannot
     be written (no space, no temporary folder), a warning is logged once and nothing more
@@ -85,8 +90,8 @@ class ColumnSpill:
         """The spill folder, or None before the first spill (and after :meth:`close`)."""
         return None if self._folder is None else self._folder.name
 
-    def write(self, patch: int, receivers: np.ndarray, factors: np.ndarray) -> bool:
-        """Spill one column; False when it could not be written."""
+    def write(self, patch: int, column: Column) -> bool:
+        """Spill one column with its gather weights; False when it could not be written."""
         if self._failed:
             return False
         try:
@@ -96,22 +101,39 @@ class ColumnSpill:
                     "form factors: columns beyond --cache-mb are spilled to %s", self._folder.name
                 )
             path = os.path.join(self._folder.name, f"{patch}.npz")
-            np.savez(path, receivers=receivers, factors=factors)
+            g = column.gather
+            np.savez(
+                path,
+                receivers=column.receivers,
+                factors=column.factors,
+                near_receivers=g.receivers,
+                near_factors=g.factors,
+                near_pointer=g.pointer,
+                sources=g.sources,
+                weights=g.weights,
+            )
         except OSError as error:
             self._failed = True
             log.warning("cannot spill form-factor columns (%s): tracing them again instead", error)
             return False
         self._paths[patch] = path
-        self.bytes += int(receivers.nbytes + factors.nbytes)
+        self.bytes += column.nbytes
         return True
 
-    def read(self, patch: int) -> tuple[np.ndarray, np.ndarray] | None:
-        """(receivers, factors) of a spilled column, or None."""
+    def read(self, patch: int) -> Column | None:
+        """A spilled column (its rays not counted again), or None."""
         path = self._paths.get(patch)
         if path is None:
             return None
         with np.load(path) as data:
-            return data["receivers"], data["factors"]
+            gather = GatherWeights(
+                data["near_receivers"],
+                data["near_factors"],
+                data["near_pointer"],
+                data["sources"],
+                data["weights"],
+            )
+            return Column(data["receivers"], data["factors"], 0, gather)
 
     def close(self) -> None:
         """Remove the spill files."""

@@ -3,15 +3,15 @@
 The form-factor pass evaluates Lambert's formula for millions of small (receiver,
 polygon) pairs: a patch's outline (whole or clipped to a receiver's horizon), near
 triangles of a sub-area, the parts of a triangle split for
-:func:`~raytrad.core.kernels.linear_corner_shares`. In numpy each of those is a chain of small temporaries; here
-each pair is one loop, compiled once (``cache=True``, so later processes load it from
-disk) and run without the GIL (``nogil=True``), so the form-factor engine's threads run
-on every core.
+:func:`~raytrad.core.kernels.linear_corner_shares`. In numpy each of those is a chain of
+small temporaries; here each pair is one loop, compiled once (``cache=True``, so later
+processes load it from disk) and run without the GIL (``nogil=True``), so the
+form-factor engine's threads run on every core.
 
 :mod:`raytrad.core.kernels`, :mod:`raytrad.core.contour` and :mod:`raytrad.core.gather`
-keep the numpy implementations as the reference: every function here computes the same formula in the
-same order, and the tests compare the two to 1e-12 on random and adversarial pairs
-(grazing, coplanar, straddling the horizon).
+keep the numpy implementations as the reference: every function here computes the same
+formula in the same order, and the tests compare the two to 1e-12 on random and
+adversarial pairs (grazing, coplanar, straddling the horizon).
 numba is imported only when a kernel is first asked for (:func:`get`), and
 ``RAYTRAD_KERNELS=numpy`` in the environment keeps the numpy path.
 """

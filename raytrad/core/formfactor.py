@@ -34,6 +34,7 @@ from raytrad.core.gather import (
     EMPTY,
     GatherRows,
     GatherWeights,
+    SubareaMeans,
     gathered_irradiance,
     join_gathers,
 )
@@ -138,7 +139,6 @@ class FormFactorEngine:
         #: Column receiver indices: int32 while they fit (a third less memory per entry).
         self._index = np.int32 if mesh.receiver_count < 2**31 else np.int64
         self._sides_lock = threading.Lock()
-        self._gathers: dict[int, GatherWeights] = {}  # kept even when columns are not
 
     @property
     def _sides(self) -> np.ndarray | None:
@@ -172,12 +172,21 @@ class FormFactorEngine:
         scale = self._row_scale[col.receivers] * self._col_scale[patch]
         return Column(col.receivers, col.factors * scale, col.rays, col.gather)
 
+    @property
+    def subarea_means(self) -> SubareaMeans:
+        """The mesh's sub-area means, the near-field gather's sources beyond its receivers."""
+        return self._pairs.subarea_means
+
     def near_field(self) -> list[tuple[int, np.ndarray, GatherWeights]]:
         """(patch, balanced factors to its near receivers, gather weights) of every patch
         with near receivers among the columns computed so far (see
-        :mod:`raytrad.core.gather`)."""
+        :mod:`raytrad.core.gather`): from the cache or the spill files, or computed again
+        where a spill file could not be written."""
         out = []
-        for patch, gather in sorted(self._gathers.items()):
+        for patch in sorted(self._summed):
+            gather = self._raw_column(patch).gather
+            if not len(gather.receivers):
+                continue
             factors = gather.factors
             if self._row_scale is not None:
                 factors = factors * self._row_scale[gather.receivers] * self._col_scale[patch]
@@ -195,17 +204,12 @@ class FormFactorEngine:
         cached = self._cache.get(patch)
         if cached is not None:
             return cached
-        stored = self._spill.read(patch)
-        if stored is None:
-            return None
-        return Column(stored[0], stored[1], 0, self._gathers.get(patch, EMPTY))
+        return self._spill.read(patch)
 
     def _store(self, patch: int, col: Column) -> Column:
         """Count, sum and (while it fits) cache a newly computed column."""
         self.columns_computed += 1
         self.rays_cast += col.rays
-        if len(col.gather.receivers):
-            self._gathers[patch] = col.gather
         if patch not in self._summed:
             self._summed.add(patch)
             self._row_sum[col.receivers] += col.factors
@@ -216,7 +220,7 @@ class FormFactorEngine:
             self._cache[patch] = col
             self._cached_bytes += size
         elif self.cache_bytes > 0:  # spill it, to read back instead of tracing again
-            self._spill.write(patch, col.receivers, col.factors)
+            self._spill.write(patch, col)
         return col
 
     def pass_columns(self) -> dict[str, np.ndarray]:
@@ -337,7 +341,7 @@ class FormFactorEngine:
         known = sum(1 for p in order.tolist() if p in self._cache or p in self._spill)
         computed = self.raw_columns(order)
         for done, (patch, col) in enumerate(computed, start=1):
-            columns[patch] = col
+            columns[patch] = Column(col.receivers, col.factors, 0)  # balancing needs no gather
             if progress is not None and done > known:  # columns restored take no time
                 progress(done - known, total - known)
             if done < total and stop is not None and stop():
@@ -504,7 +508,7 @@ class FormFactorEngine:
         normals = np.asarray(normals, dtype=np.float64).reshape(-1, 3)
         origins = points + tol.ray_offset * self.diagonal * normals
         sides = self._pairs.sides(origins)
-        rows = GatherRows(len(points), np.zeros(len(points)), [])
+        rows = GatherRows(len(points), np.zeros(len(points)), [], self.subarea_means)
 
         def work(patch: int) -> tuple[np.ndarray, tuple[np.ndarray, int, GatherWeights]]:
             near = self._candidates(patch, points, normals)

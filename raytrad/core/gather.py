@@ -23,6 +23,7 @@ solution as a correction that is itself shot on (:func:`raytrad.core.solver.solv
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -52,7 +53,8 @@ class GatherWeights:
     pointer : (G + 1,) int64
         CSR pointers into ``sources`` and ``weights`` by near receiver.
     sources : (S,) int64
-        Receivers of the patch the radiosity is gathered from.
+        Receivers of the patch the radiosity is gathered from, or, from ``R`` (the
+        receiver count) on, the mean of sub-area ``source - R`` (:class:`SubareaMeans`).
     weights : (S,) float64
         Their share; each near receiver's shares sum to 1.
     """
@@ -64,8 +66,10 @@ class GatherWeights:
     weights: np.ndarray
 
     def gathered(self, radiosity: np.ndarray) -> np.ndarray:
-        """(G, 3) radiosity each near receiver sees on the patch [W m-2], from the (R, 3)
-        receiver ``radiosity``; compiled when available (see :meth:`numpy_gathered`)."""
+        """(G, 3) radiosity each near receiver sees on the patch [W m-2], from the
+        receiver ``radiosity`` and the sub-area means after it ((R + SA, 3),
+        :meth:`SubareaMeans.extend`); compiled when available (see
+        :meth:`numpy_gathered`)."""
         fast = compiled.get()
         if fast is None:
             return self.numpy_gathered(radiosity)
@@ -129,6 +133,7 @@ class GatherRows:
     count: int
     row_sum: np.ndarray
     patches: list[tuple[int, np.ndarray, np.ndarray, GatherWeights]]
+    means: SubareaMeans | None = None  # the sources beyond the receivers
 
 
 def gathered_irradiance(
@@ -137,6 +142,8 @@ def gathered_irradiance(
     """(N, 3) irradiance [W m-2] the points of ``rows`` gather from a solution: receiver
     ``radiosity`` (R, 3) and its patch means ``patch_radiosity`` (P, 3) [W m-2]."""
     irradiance = np.zeros((rows.count, 3))
+    if rows.means is not None:
+        radiosity = rows.means.extend(radiosity)
     for patch, near, factors, gather in rows.patches:
         irradiance[near] += factors[:, None] * patch_radiosity[patch]
         if len(gather.receivers):
@@ -144,6 +151,101 @@ def gathered_irradiance(
             local = gather.receivers
             irradiance[near[local]] += factors[local, None] * excess
     return irradiance
+
+
+@dataclass(frozen=True)
+class SubareaMeans:
+    """Each sub-area's mean radiosity as a source of the near-field gather.
+
+    A receiver far from a sub-area (beyond :data:`MIDPOINT_SIZES` of its sizes) spreads
+    its weight of the sub-area by area over the sub-area's visible receivers: that says
+    no more than their area-weighted mean. So its gather weights name the mean instead,
+    as source ``base + s``, one entry whatever the sub-area's receiver count (which grows
+    with refinement); :meth:`extend` appends the means to a radiosity.
+
+    Attributes
+    ----------
+    base : int
+        The mesh's receiver count.
+    pointer : (SA + 1,) int64
+        CSR pointers into ``receivers`` and ``shares`` by sub-area.
+    receivers : (Q,) int64
+        Each sub-area's visible receivers (corners of its triangles).
+    shares : (Q,) float64
+        Their area shares, summing to 1 per sub-area with any.
+    """
+
+    base: int
+    pointer: np.ndarray
+    receivers: np.ndarray
+    shares: np.ndarray
+
+    def extend(self, radiosity: np.ndarray) -> np.ndarray:
+        """(R + SA, 3) the (R, 3) receiver ``radiosity`` followed by its sub-area means."""
+        return np.concatenate([radiosity, self.of(np.arange(len(self.pointer) - 1), radiosity)])
+
+    def of(self, subareas: np.ndarray, radiosity: np.ndarray) -> np.ndarray:
+        """(K, 3) means of ``radiosity`` ((R, 3) or longer) over the (K,) ``subareas``."""
+        owner, index = _csr_slots(self.pointer, subareas)
+        values = self.shares[index, None] * radiosity[self.receivers[index]]
+        count = len(subareas)
+        means = [np.bincount(owner, weights=values[:, k], minlength=count) for k in range(3)]
+        return np.stack(means, axis=1)
+
+
+def subarea_triangles(mesh: RadiosityMesh) -> tuple[np.ndarray, np.ndarray]:
+    """The triangles grouped by sub-area ((T,) int64, ascending within one) and CSR
+    pointers into them ((SA + 1,) int64)."""
+    order = np.lexsort((np.arange(len(mesh.triangle_subarea)), mesh.triangle_subarea))
+    return order, np.searchsorted(mesh.triangle_subarea[order], np.arange(mesh.subarea_count + 1))
+
+
+def subarea_means(mesh: RadiosityMesh) -> SubareaMeans:
+    """The sub-area means of ``mesh`` (as :class:`GatherShares` makes them)."""
+    sub_tri, sub_ptr = subarea_triangles(mesh)
+    corner_share = corner_shares(mesh)
+    tri_share = _area_shares(mesh, corner_share, sub_tri, sub_ptr)
+    return _means(mesh, corner_share, tri_share, sub_tri, sub_ptr)
+
+
+def corner_shares(mesh: RadiosityMesh) -> np.ndarray:
+    """(T, 3) share of each triangle's corners in its radiosity: 1/3 each, a hidden
+    corner's going to the visible ones (all 0 where every corner is hidden)."""
+    visible = (
+        np.ones(mesh.receiver_count, bool)
+        if mesh.receiver_visible is None
+        else np.asarray(mesh.receiver_visible, bool)
+    )
+    share = visible[mesh.triangle_receivers].astype(np.float64)
+    counts = share.sum(axis=1, keepdims=True)
+    return np.divide(share, counts, out=np.zeros_like(share), where=counts > 0)
+
+
+def _area_shares(
+    mesh: RadiosityMesh, corner_share: np.ndarray, sub_tri: np.ndarray, sub_ptr: np.ndarray
+) -> np.ndarray:
+    """(T,) area share of ``sub_tri[k]`` in its sub-area (0 for triangles none sees)."""
+    area = mesh.triangle_area[sub_tri] * (corner_share[sub_tri].sum(axis=1) > 0)
+    owner = np.repeat(np.arange(len(sub_ptr) - 1), np.diff(sub_ptr))
+    total = np.bincount(owner, weights=area, minlength=len(sub_ptr) - 1)
+    return np.divide(area, total[owner], out=np.zeros_like(area), where=total[owner] > 0)
+
+
+def _means(
+    mesh: RadiosityMesh,
+    corner_share: np.ndarray,
+    tri_share: np.ndarray,
+    sub_tri: np.ndarray,
+    sub_ptr: np.ndarray,
+) -> SubareaMeans:
+    owner = np.repeat(np.arange(len(sub_ptr) - 1), np.diff(sub_ptr))
+    pointer, receivers, shares = numpy_sum_shares(
+        np.repeat(owner, 3),
+        mesh.triangle_receivers[sub_tri].reshape(-1),
+        (tri_share[:, None] * corner_share[sub_tri]).reshape(-1),
+        len(sub_ptr) - 1,
+    )
+    return SubareaMeans(mesh.receiver_count, pointer, receivers, shares)
 
 
 class GatherShares:
@@ -157,37 +259,19 @@ class GatherShares:
     """
 
     def __init__(self, mesh: RadiosityMesh, sub_tri: np.ndarray, sub_ptr: np.ndarray) -> None:
-        corners = mesh.triangle_receivers
-        visible = (
-            np.ones(mesh.receiver_count, bool)
-            if mesh.receiver_visible is None
-            else np.asarray(mesh.receiver_visible, bool)
-        )
-        share = visible[corners].astype(np.float64)
-        counts = share.sum(axis=1, keepdims=True)
-        #: (T, 3) share of each corner of each triangle
-        self.corner_share = np.divide(share, counts, out=np.zeros_like(share), where=counts > 0)
-        self.corners = corners
+        #: (T, 3) share of each corner of each triangle (0 for hidden corners)
+        self.corner_share = corner_shares(mesh)
+        self.corners = mesh.triangle_receivers
         # sub-area s: its triangles (sub_tri[sub_ptr[s]:sub_ptr[s+1]]) weighted by area
-        area = mesh.triangle_area[sub_tri] * (counts[sub_tri, 0] > 0)
-        owner = np.repeat(np.arange(len(sub_ptr) - 1), np.diff(sub_ptr))
-        total = np.bincount(owner, weights=area, minlength=len(sub_ptr) - 1)
         self.sub_tri = sub_tri
         self.sub_ptr = sub_ptr
-        self.tri_share = np.divide(
-            area, total[owner], out=np.zeros_like(area), where=total[owner] > 0
-        )
+        self.tri_share = _area_shares(mesh, self.corner_share, sub_tri, sub_ptr)
         self.tri_corners = mesh.positions[mesh.triangles]
         self.tri_normal = mesh.triangle_normal
         self.sub_point = mesh.subarea_point
         self.sub_reach = MIDPOINT_SIZES * mesh.subarea_size
-        # each sub-area's receivers and their area shares (for far receivers)
-        self.src_ptr, self.src, self.src_share = numpy_sum_shares(
-            np.repeat(owner, 3),
-            corners[sub_tri].reshape(-1),
-            (self.tri_share[:, None] * self.corner_share[sub_tri]).reshape(-1),
-            len(sub_ptr) - 1,
-        )
+        #: each sub-area's mean: the source of far receivers' weights of it
+        self.means = _means(mesh, self.corner_share, self.tri_share, sub_tri, sub_ptr)
 
     def spread(
         self,
@@ -236,9 +320,8 @@ class GatherShares:
             normals,
             self.sub_point,
             self.sub_reach,
-            self.src_ptr,
-            self.src,
-            self.src_share,
+            self.means.pointer,
+            self.means.base,
         )
         seen = self.corner_share[triangles] > 0
         own = np.where(seen, tri_share, 0.0)
@@ -250,18 +333,19 @@ class GatherShares:
         return sum_shares(pair, source, weight, len(points))
 
 
-def subarea_spread(*arrays: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def subarea_spread(*arrays: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Sub-area elements' weights on their triangles' corners, compiled when available
     (see :func:`numpy_subarea_spread`, the reference, for the arguments)."""
     fast = compiled.get()
     if fast is None:
         return numpy_subarea_spread(*arrays)
-    ints = (0, 1, 3, 4, 7, 14, 15)
+    *given, base = arrays
+    ints = (0, 1, 3, 4, 7, 14)
     cast = [
         np.ascontiguousarray(a, dtype=np.int64 if i in ints else np.float64)
-        for i, a in enumerate(arrays)
+        for i, a in enumerate(given)
     ]
-    pair, source, weight = fast.subarea_spread(*cast, RULE_POINTS, RULE_WEIGHTS)
+    pair, source, weight = fast.subarea_spread(*cast, int(base), RULE_POINTS, RULE_WEIGHTS)
     return pair, source, weight
 
 
@@ -281,16 +365,18 @@ def numpy_subarea_spread(
     sub_point: np.ndarray,
     sub_reach: np.ndarray,
     src_ptr: np.ndarray,
-    src: np.ndarray,
-    src_share: np.ndarray,
+    base: int,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Where on a sub-area a receiver's visible weight of it lies, as corner weights.
 
     Within ``sub_reach`` of the sub-area's sample point, each corner of each of the
     sub-area's triangles weighs what the receiver sees of its part of the triangle
     (:func:`corner_form_factors`, a form factor), a hidden corner's weight going to
-    the triangle's visible ones in proportion. A sub-area farther away, or of which the
-    receiver sees none, spreads its sampled weight by area over its receivers.
+    the triangle's visible ones in proportion; where the receiver sees none of it, by
+    area over them. A sub-area farther away hands its sampled weight to its mean
+    (source ``base + s``, :class:`SubareaMeans`): spread by area over its receivers, as
+    it would be, it would say no more than the mean, at the cost of an entry for each of
+    them, and their count grows with refinement.
 
     Parameters
     ----------
@@ -315,19 +401,20 @@ def numpy_subarea_spread(
     sub_point, sub_reach : (SA, 3), (SA,) float64
         Sub-areas' sample points and the distance within which they spread by
         :func:`corner_form_factors` [m].
-    src_ptr, src, src_share : (SA + 1,) int64, (Q,) int64, (Q,) float64
-        Each sub-area's visible receivers and their area shares (CSR, summing to 1).
+    src_ptr : (SA + 1,) int64
+        CSR pointers of each sub-area's visible receivers (:class:`SubareaMeans`); a
+        sub-area with none gets nothing.
+    base : int
+        The receiver count: sub-area ``s``'s mean is source ``base + s``.
 
     Returns
     -------
     pair, source : (N,) int64
-        Pair and receiver of each weight.
+        Pair and receiver (or ``base`` + sub-area) of each weight.
     weight : (N,) float64 >= 0
     """
     far = np.linalg.norm(points[sub_pair] - sub_point[subareas], axis=1) > sub_reach[subareas]
-    owner, index = _csr_slots(src_ptr, subareas[far])
-    far_pair = sub_pair[far][owner]
-    far_weight = sub_weight[far][owner] * src_share[index]
+    handed = far & (src_ptr[subareas + 1] > src_ptr[subareas])  # a mean to hand on to
     near = np.flatnonzero(~far)
     element, slot = _csr_slots(sub_ptr, subareas[near])
     tri = sub_tri[slot]
@@ -341,9 +428,9 @@ def numpy_subarea_spread(
     by_area = (sub_weight[near][element] * tri_share[slot])[:, None] * share
     weight = np.where(total[:, None] > 0, kept, by_area)
     return (
-        np.concatenate([far_pair, np.repeat(pair, 3)]),
-        np.concatenate([src[index], corners[tri].reshape(-1)]),
-        np.concatenate([far_weight, weight.reshape(-1)]),
+        np.concatenate([sub_pair[handed], np.repeat(pair, 3)]),
+        np.concatenate([base + subareas[handed], corners[tri].reshape(-1)]),
+        np.concatenate([sub_weight[handed], weight.reshape(-1)]),
     )
 
 
@@ -469,6 +556,7 @@ def near_field_irradiance(
     patch_radiosity: np.ndarray,
     factors: np.ndarray,
     receiver_area: np.ndarray,
+    means: SubareaMeans,
 ) -> np.ndarray:
     """Irradiance a receiver gets beyond the patch means: sum_p F_jp (B̃_jp - B̄_p) at
     near receivers, less the same power taken from the far ones.
@@ -488,14 +576,17 @@ def near_field_irradiance(
     factors : (R, P) float
         The dense form-factor matrix, near factors included [1].
     receiver_area : (R,) float [m2]
+    means : SubareaMeans
+        Of the mesh (the gather's sources beyond its receivers).
 
     Returns
     -------
     (R, 3) float64 [W m-2]
     """
     out = np.zeros_like(radiosity, dtype=np.float64)
+    extended = means.extend(radiosity)
     for patch, near_factors, gather in gathers:
-        excess = near_factors[:, None] * (gather.gathered(radiosity) - patch_radiosity[patch])
+        excess = near_factors[:, None] * (gather.gathered(extended) - patch_radiosity[patch])
         np.add.at(out, gather.receivers, excess)
         column = np.array(factors[:, patch], dtype=np.float64)
         column[gather.receivers] = 0.0

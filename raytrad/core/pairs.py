@@ -31,7 +31,9 @@ from raytrad.core.gather import (
     GATHER_RADII,
     GatherShares,
     GatherWeights,
+    SubareaMeans,
     corner_form_factors,
+    subarea_triangles,
 )
 from raytrad.core.kernels import (
     linear_corner_shares,
@@ -112,11 +114,7 @@ class PairFactors:
     def _triangle_tables(self) -> None:
         """The tables that follow the mesh's triangles (rebuilt on a refined mesh)."""
         mesh = self.mesh
-        order = np.lexsort((np.arange(len(mesh.triangle_subarea)), mesh.triangle_subarea))
-        self._sub_tri = order
-        self._sub_ptr = np.searchsorted(
-            mesh.triangle_subarea[order], np.arange(mesh.subarea_count + 1)
-        )
+        self._sub_tri, self._sub_ptr = subarea_triangles(mesh)
         self._tri_corners = mesh.positions[mesh.triangles]
         self._shares = GatherShares(mesh, self._sub_tri, self._sub_ptr)
 
@@ -134,6 +132,11 @@ class PairFactors:
         out._count_lock = threading.Lock()
         out._triangle_tables()
         return out
+
+    @property
+    def subarea_means(self) -> SubareaMeans:
+        """The sources of far sub-areas' gather weights (:class:`SubareaMeans`)."""
+        return self._shares.means
 
     def sides(self, origins: np.ndarray) -> np.ndarray | None:
         """Packed facet side bits of ray origins for :meth:`chunk` (None: no culling)."""

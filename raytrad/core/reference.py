@@ -82,7 +82,7 @@ def dense_solve(mesh: RadiosityMesh, engine: FormFactorEngine) -> np.ndarray:
     radiosity = np.array(emission, dtype=np.float64)
     for _ in range(DENSE_NEAR_FIELD_ROUNDS):
         correction = near_field_irradiance(
-            near, radiosity, average @ radiosity, factors, mesh.receiver_area
+            near, radiosity, average @ radiosity, factors, mesh.receiver_area, engine.subarea_means
         )
         source = emission + rho * correction
         new = np.empty_like(radiosity)

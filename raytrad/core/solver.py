@@ -409,6 +409,7 @@ def _shoot(
         numpy_shoot(problem, state, column, patch, amount)
         return
     gather = column.gather
+    means = problem.subarea_means
     power, reflected, capture = fast.shoot(
         problem.patch_entries[problem.patch_ptr[patch] : problem.patch_ptr[patch + 1]],
         problem.entry_receiver,
@@ -429,6 +430,12 @@ def _shoot(
         problem.entry_patch,
         state.patch_radiosity,
         problem.scratch,
+        problem.patch_subareas[patch],
+        problem.patch_subareas[patch + 1],
+        means.pointer,
+        means.receivers,
+        means.shares,
+        means.base,
     )
     area_p = problem.patch_area[patch]
     state.shot[patch] += amount
@@ -466,9 +473,13 @@ def numpy_shoot(
     gather = column.gather
     if len(gather.receivers):
         problem.scratch[sources] = shots
+        means = problem.subarea_means
+        subareas = np.arange(problem.patch_subareas[patch], problem.patch_subareas[patch + 1])
+        problem.scratch[means.base + subareas] = means.of(subareas, problem.scratch)
         near = np.searchsorted(j, gather.receivers)
         irradiance[near] = f[near, None] * gather.gathered(problem.scratch)
         problem.scratch[sources] = 0.0
+        problem.scratch[means.base + subareas] = 0.0
         _conserve(irradiance, f, amount, problem.receiver_area[j], near)
     state.irradiance[j] += irradiance
     reflected = problem.receiver_reflectance[j] * irradiance

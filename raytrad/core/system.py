@@ -14,6 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from raytrad.core import compiled
+from raytrad.core.gather import SubareaMeans, subarea_means
 from raytrad.core.mesh import RadiosityMesh
 
 
@@ -32,7 +33,9 @@ class DiscreteSystem:
     entry_receiver: np.ndarray  # (nnz,)
     patch_entries: np.ndarray  # (nnz,) entries grouped by patch
     patch_ptr: np.ndarray  # (P + 1,) CSR pointers into patch_entries
-    scratch: np.ndarray  # (R, 3) zeros, a work array of _shoot
+    subarea_means: SubareaMeans  # the near-field gather's sources beyond the receivers
+    patch_subareas: np.ndarray  # (P + 1,) each patch's sub-areas, CSR pointers
+    scratch: np.ndarray  # (R + SA, 3) zeros, a work array of _shoot
 
     @classmethod
     def from_mesh(cls, mesh: RadiosityMesh) -> DiscreteSystem:
@@ -61,7 +64,9 @@ class DiscreteSystem:
             entry_receiver=r,
             patch_entries=by_patch,
             patch_ptr=np.searchsorted(entry_patch[by_patch], np.arange(mesh.patch_count + 1)),
-            scratch=np.zeros((mesh.receiver_count, 3)),
+            subarea_means=subarea_means(mesh),
+            patch_subareas=np.searchsorted(mesh.subarea_patch, np.arange(mesh.patch_count + 1)),
+            scratch=np.zeros((mesh.receiver_count + mesh.subarea_count, 3)),
         )
 
     def spread(

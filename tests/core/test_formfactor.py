@@ -509,14 +509,22 @@ def test_shadow_scene_needs_rays(prepare_scene: Callable[..., Prepared]) -> None
 
 
 def test_columns_beyond_the_cache_are_spilled_not_retraced(cornell: Prepared) -> None:
-    """With a cache too small for any column, every column goes to a spill file once: the
-    solve reads them back (no ray after the pass) and gives the cached engine's answer."""
+    """With a cache too small for any column, every column goes to a spill file once, its
+    near-field gather weights with it (the cache bounds both): the solve reads them back
+    (no ray after the pass) and gives the cached engine's answer."""
     tiny = FormFactorEngine(cornell.mesh, cornell.occluder, cache_bytes=1)
     try:
         tiny.balance(cornell.closed_receivers)
         assert tiny._spill.bytes > 0 and not tiny._cache
         assert len(tiny._spill) == cornell.mesh.patch_count
         rays = tiny.rays_cast
+        near, kept = tiny.near_field(), cornell.engine.near_field()
+        assert len(near) == len(kept) > 0
+        for (pa, fa, ga), (pb, fb, gb) in zip(near, kept, strict=True):
+            assert pa == pb
+            np.testing.assert_array_equal(fa, fb)
+            np.testing.assert_array_equal(ga.sources, gb.sources)
+            np.testing.assert_array_equal(ga.weights, gb.weights)
         settings = SolveSettings(max_shots=200)
         spilled = solve(cornell.mesh, tiny, settings)
         cached = solve(cornell.mesh, cornell.engine, settings)

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import itertools
 from collections.abc import Callable
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -23,6 +24,7 @@ from raytrad.core.gather import (
     corner_form_factors,
     numpy_subarea_spread,
     numpy_sum_shares,
+    subarea_means,
     subarea_spread,
     sum_shares,
 )
@@ -228,22 +230,21 @@ def test_compiled_subarea_spread_matches_numpy(cornell_mesh: tuple[Scene, Radios
         normals,
         shares.sub_point,
         shares.sub_reach,
-        shares.src_ptr,
-        shares.src,
-        shares.src_share,
+        shares.means.pointer,
+        shares.means.base,
     )
     fast, slow = subarea_spread(*arrays), numpy_subarea_spread(*arrays)
     reach = np.linalg.norm(points[sub_pair] - mesh.subarea_point[subareas], axis=1)
     near_elements = reach <= shares.sub_reach[subareas]
     assert 100 < near_elements.sum() < len(subareas) - 100  # both kinds are exercised
-    stride = mesh.receiver_count
+    stride = mesh.receiver_count + mesh.subarea_count
     totals = []
     for pair, source, weight in (fast, slow):
         totals.append(np.bincount(pair * stride + source, weights=weight, minlength=pairs * stride))
     np.testing.assert_allclose(totals[0], totals[1], rtol=1e-12, atol=1e-15 * totals[1].max())
     # independently: a far element hands on its sampled weight; a near one what the
     # receiver sees of its visible triangles (or, seeing none of them, its weight)
-    expected = np.where(np.diff(shares.src_ptr)[subareas] > 0, sub_weight, 0.0)
+    expected = np.where(np.diff(shares.means.pointer)[subareas] > 0, sub_weight, 0.0)
     for k in np.flatnonzero(near_elements):
         tris = shares.sub_tri[shares.sub_ptr[subareas[k]] : shares.sub_ptr[subareas[k] + 1]]
         tris = tris[shares.corner_share[tris].sum(axis=1) > 0]
@@ -257,3 +258,36 @@ def test_compiled_subarea_spread_matches_numpy(cornell_mesh: tuple[Scene, Radios
         expected[k] = seen if seen > 0 else expected[k]
     assert (expected[near_elements] != sub_weight[near_elements]).mean() > 0.5
     np.testing.assert_allclose(fast[2].sum(), expected.sum(), rtol=1e-12)
+    # a far element is one weight on its sub-area's mean, however many receivers it has
+    base = mesh.receiver_count
+    for _, source, weight in (fast, slow):
+        on_means = source >= base
+        handed = ~near_elements & (np.diff(shares.means.pointer)[subareas] > 0)
+        assert on_means.sum() == handed.sum() > 1000
+        np.testing.assert_array_equal(np.sort(source[on_means] - base), np.sort(subareas[handed]))
+        np.testing.assert_allclose(weight[on_means].sum(), sub_weight[handed].sum(), rtol=1e-12)
+
+
+def test_subarea_means_are_area_weighted_over_visible_corners(
+    cornell_mesh: tuple[Scene, RadiosityMesh],
+) -> None:
+    """Each sub-area's mean, against a loop over its triangles: area x the mean of the
+    visible corners, over the area of triangles with any (hidden receivers count for
+    nothing)."""
+    _, mesh = cornell_mesh
+    rng = np.random.default_rng(13)
+    visible = rng.random(mesh.receiver_count) > 0.1
+    mesh = replace(mesh, receiver_visible=visible)
+    radiosity = rng.random((mesh.receiver_count, 3))
+    extended = subarea_means(mesh).extend(radiosity)
+    assert extended.shape == (mesh.receiver_count + mesh.subarea_count, 3)
+    np.testing.assert_array_equal(extended[: mesh.receiver_count], radiosity)
+    for s in rng.choice(mesh.subarea_count, 60, replace=False):
+        total, area = np.zeros(3), 0.0
+        for t in np.flatnonzero(mesh.triangle_subarea == s):
+            seen = [k for k in mesh.triangle_receivers[t] if visible[k]]
+            if seen:
+                total += mesh.triangle_area[t] * radiosity[seen].mean(axis=0)
+                area += mesh.triangle_area[t]
+        want = total / area if area > 0 else np.zeros(3)
+        np.testing.assert_allclose(extended[mesh.receiver_count + s], want, rtol=1e-12)
