@@ -181,7 +181,16 @@ class SubareaMeans:
     shares: np.ndarray
 
     def extend(self, radiosity: np.ndarray) -> np.ndarray:
-        """(R + SA, 3) the (R, 3) receiver ``radiosity`` followed by its sub-area means."""
+        """(R + SA, 3) the (R, 3) receiver ``radiosity`` followed by its sub-area means.
+
+        Raises
+        ------
+        ValueError
+            ``radiosity`` is not of this mesh's R receivers (the means would land at the
+            wrong sources).
+        """
+        if len(radiosity) != self.base:
+            raise ValueError(f"radiosity of {len(radiosity)} receivers for a mesh of {self.base}")
         return np.concatenate([radiosity, self.of(np.arange(len(self.pointer) - 1), radiosity)])
 
     def of(self, subareas: np.ndarray, radiosity: np.ndarray) -> np.ndarray:

@@ -279,8 +279,11 @@ def test_subarea_means_are_area_weighted_over_visible_corners(
     visible = rng.random(mesh.receiver_count) > 0.1
     mesh = replace(mesh, receiver_visible=visible)
     radiosity = rng.random((mesh.receiver_count, 3))
-    extended = subarea_means(mesh).extend(radiosity)
+    means = subarea_means(mesh)
+    extended = means.extend(radiosity)
     assert extended.shape == (mesh.receiver_count + mesh.subarea_count, 3)
+    with pytest.raises(ValueError, match="receivers for a mesh of"):
+        means.extend(radiosity[:-1])  # another mesh's radiosity: refused, not misplaced
     np.testing.assert_array_equal(extended[: mesh.receiver_count], radiosity)
     for s in rng.choice(mesh.subarea_count, 60, replace=False):
         total, area = np.zeros(3), 0.0
