@@ -6,10 +6,10 @@ A column holds F(receiver <- patch) for the receivers that see one patch, compac
 weights (int32 sources, float32 shares). The engine
 (:class:`~raytrad.core.formfactor.FormFactorEngine`) caches columns, weights included, up
 to ``--cache-mb``; the rest go to :class:`ColumnSpill`, one small ``.npz`` file each in a
-temporary folder
-(honours ``TMPDIR``), and are read back when a patch shoots again: reading a column back
-takes milliseconds where tracing it again took a good fraction of a second, so a scene
-whose columns outgrow the cache no longer slows the solve down by orders of magnitude.
+temporary folder (honours ``TMPDIR``), and are read back when a patch shoots again:
+reading a column back takes milliseconds where tracing it again took a good fraction of
+a second, so a scene whose columns outgrow the cache no longer slows the solve down by
+orders of magnitude.
 """
 
 from __future__ import annotations
@@ -57,10 +57,10 @@ class Column:
     @property
     def nbytes(self) -> int:
         """Memory the cache counts for the column [bytes]: its receivers, factors and
-        near-field gather weights."""
+        near-field gather weights, and 64 for the object."""
         g = self.gather
-        arrays = (g.receivers, g.factors, g.pointer, g.sources, g.weights)
-        return int(self.receivers.nbytes + self.factors.nbytes + sum(a.nbytes for a in arrays))
+        arrays = (self.receivers, self.factors, g.receivers, g.factors, g.pointer, g.sources)
+        return int(sum(a.nbytes for a in arrays) + g.weights.nbytes + 64)
 
 
 class ColumnSpill:

@@ -299,16 +299,19 @@ class PairFactors:
         cancel): the whole outline where the patch lies above the receiver's horizon, the
         outline clipped to the horizon where it straddles it
         (:mod:`raytrad.core.contour`). A folded patch (a warped quad's two triangles)
-        goes triangle by triangle: seen from a receiver on it, the contour sum would
-        count the fold's own surface as a full hemisphere.
+        goes piece by planar piece, each piece's outline clipped: seen from a receiver on
+        it, the patch's own contour sum would count the fold's surface as a full
+        hemisphere.
         """
         m = self.mesh
         a, b = self._edge_ptr[patch], self._edge_ptr[patch + 1]
         planar = bool(m.patch_planar[patch])
         if planar:  # a plane's heights are extreme at its outline's corners
             verts = self._edge_start[a:b]
-        else:
-            verts = m.positions[self._vert_index[self._vert_ptr[patch] : self._vert_ptr[patch + 1]]]
+        else:  # and a folded patch's at its pieces' outlines' corners
+            pieces = self._pieces
+            first, last = pieces.patch_ptr[patch], pieces.patch_ptr[patch + 1]
+            verts = pieces.start[pieces.edge_ptr[first] : pieces.edge_ptr[last]]
         height = verts @ nx.T - np.einsum("cj,cj->c", x, nx)[None, :]  # (Vp, C)
         band = tol.horizon * self.diagonal
         top = height.max(axis=0)
