@@ -119,7 +119,7 @@ def _print_summary(report: dict[str, Any], outputs: dict[str, Path]) -> None:
         f"{stats['patches']} patches, {stats['subareas']} sample points",
         f"solve      {s['method']}: {s['stop_reason']} after {s['shots']} shots, "
         f"residual {s['residual']:.2e}",
-        f"rays       {s['rays']} ({s['rays_per_second']:.3g} rays/s"
+        f"rays       {s['rays']} in the form-factor pass ({s['rays_per_second']:.3g} rays/s"
         + (
             f"; {_share(s['rays'], s['rays_naive'])} of {s['rays_naive']} without culling"
             if stats["occlusion_tested"]

@@ -190,7 +190,8 @@ def build_parser() -> argparse.ArgumentParser:
         "--resume",
         action="store_true",
         help="continue a stopped run (Ctrl-C, --time-limit, --max-shots) from its checkpoint "
-        "in DIR; the limits count the whole solve",
+        "in DIR; --max-shots counts the whole solve's shots, --time-limit this command's "
+        "seconds",
     )
     compare = sub.add_parser(
         "compare",

@@ -244,7 +244,7 @@ def _pass_progress() -> Callable[[int, int], None]:
             last = now
             if done - 1 < min(PASS_RATE_COLUMNS, total // 4):
                 log.info(
-                    "form factors: %d of %d columns to compute in %.0f s, time left not known yet",
+                    "form factors: %d of %d columns done in %.0f s, time left not known yet",
                     done,
                     total,
                     now - start,
@@ -252,7 +252,7 @@ def _pass_progress() -> Callable[[int, int], None]:
                 return
             left = (now - first) / (done - 1) * (total - done)
             log.info(
-                "form factors: %d of %d columns to compute in %.0f s, about %.0f s left",
+                "form factors: %d of %d columns done in %.0f s, about %.0f s left",
                 done,
                 total,
                 now - start,

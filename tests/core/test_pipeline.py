@@ -147,9 +147,9 @@ def test_the_pass_promises_no_time_left_from_a_burst(
         report(17, 541)
         report(41, 541)
     lines = [r.getMessage() for r in caplog.records]
-    assert lines[0] == "form factors: 2 of 541 columns to compute in 13 s, time left not known yet"
+    assert lines[0] == "form factors: 2 of 541 columns done in 13 s, time left not known yet"
     # 16 columns in 7 s after the first: 524 left take 229 s
-    assert lines[1] == "form factors: 17 of 541 columns to compute in 20 s, about 229 s left"
+    assert lines[1] == "form factors: 17 of 541 columns done in 20 s, about 229 s left"
     assert lines[2].endswith("about 225 s left")  # 40 columns in 18 s: 500 left
 
 
