@@ -209,6 +209,18 @@ def _wait_for_lock(folder: Path, process: subprocess.Popen[bytes], seconds: floa
     raise AssertionError(f"no job started in {folder}")
 
 
+def _wait_for_file(path: Path, process: subprocess.Popen[bytes], seconds: float = 120) -> None:
+    """Return once ``path`` exists (the bake still running)."""
+    end = time.monotonic() + seconds
+    while time.monotonic() < end:
+        if process.poll() is not None:
+            raise AssertionError(f"the bake ended first: {process.communicate()[1].decode()}")
+        if path.is_file():
+            return
+        time.sleep(0.02)
+    raise AssertionError(f"no {path.name} in {seconds} s")
+
+
 @pytest.mark.slow  # about 45 s: two bakes, one killed, one stopped and resumed
 @POSIX
 def test_a_killed_pool_worker_is_retried_and_a_sigterm_bake_resumes(tmp_path: Path) -> None:
@@ -230,10 +242,13 @@ def test_a_killed_pool_worker_is_retried_and_a_sigterm_bake_resumes(tmp_path: Pa
     assert all(api.verify_outputs(tmp_path / "out" / n) == [] for n in ("cornell", "furnace"))
 
     # SIGTERM mid-job: a checkpoint, exit 143; the next bake resumes it
+    assert not (tmp_path / "out/cornell/cornell.checkpoint.npz").exists()  # none left over
     _manifest(tmp_path, defaults="checkpoint_every = 0.2\ntolerance = 1e-5", receivers=3000)
     bake_process = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
     _wait_for_lock(tmp_path / "out/cornell", bake_process)
-    time.sleep(2.0)
+    # the job's first periodic checkpoint says it is under way (a fixed sleep raced it:
+    # the job came to finish within 2 s as renders got faster)
+    _wait_for_file(tmp_path / "out/cornell/cornell.checkpoint.npz", bake_process)
     bake_process.send_signal(signal.SIGTERM)
     _, err = bake_process.communicate(timeout=600)
     assert bake_process.returncode == 128 + signal.SIGTERM, err.decode()
