@@ -37,7 +37,8 @@ def boundary_edges(
     ----------
     mesh : RadiosityMesh
     labels, count : (T,) int64 and int, optional
-        Other groups of triangles to outline instead of the patches (label -1: none).
+        Other groups of triangles to outline instead of the patches (label -1: none), and
+        their count (default: the largest label + 1).
 
     Returns
     -------
@@ -46,7 +47,8 @@ def boundary_edges(
     """
     if labels is None:
         labels, count = mesh.triangle_patch, mesh.patch_count
-    assert count is not None
+    elif count is None:
+        count = int(labels.max(initial=-1)) + 1
     tri = mesh.triangles[labels >= 0]
     a = tri.reshape(-1)
     b = np.roll(tri, -1, axis=1).reshape(-1)
