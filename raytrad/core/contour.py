@@ -36,12 +36,8 @@ import math
 import numpy as np
 
 from raytrad.core import compiled
-from raytrad.core.kernels import edge_sum, edge_terms
+from raytrad.core.kernels import _f64, edge_sum, edge_terms
 from raytrad.core.outline import Pieces
-
-
-def _f64(array: np.ndarray) -> np.ndarray:
-    return np.ascontiguousarray(array, dtype=np.float64)
 
 
 def contour_form_factor(

@@ -326,13 +326,15 @@ class PairFactors:
                 self._edge_start[a:b], self._edge_end[a:b], x[above], nx[above]
             )
         straddle = ~above & (top > band)
-        if straddle.any() and planar:
-            out[straddle] = clipped_contour_form_factor(
-                self._edge_start[a:b], self._edge_end[a:b], x[straddle], nx[straddle]
-            )
-        elif straddle.any():
-            out[straddle] = piecewise_contour_form_factor(
-                self._pieces, patch, x[straddle], nx[straddle], band
+        if straddle.any():
+            out[straddle] = (
+                clipped_contour_form_factor(
+                    self._edge_start[a:b], self._edge_end[a:b], x[straddle], nx[straddle]
+                )
+                if planar
+                else piecewise_contour_form_factor(
+                    self._pieces, patch, x[straddle], nx[straddle], band
+                )
             )
         return out
 

@@ -319,7 +319,7 @@ def solve(
     """
     settings = settings or SolveSettings()
     check_solvable(mesh)
-    problem = DiscreteSystem.from_mesh(mesh)
+    problem = DiscreteSystem.from_mesh(mesh, engine.subarea_means)
     state = state or new_state(mesh, problem)
     if state.entry_shot.shape != (len(problem.entry_patch), 3):
         raise SolverError("the state to resume was made for another mesh")

@@ -38,7 +38,9 @@ class DiscreteSystem:
     scratch: np.ndarray  # (R + SA, 3) zeros, a work array of _shoot
 
     @classmethod
-    def from_mesh(cls, mesh: RadiosityMesh) -> DiscreteSystem:
+    def from_mesh(cls, mesh: RadiosityMesh, means: SubareaMeans | None = None) -> DiscreteSystem:
+        """The system of ``mesh``; ``means`` are its sub-area means when the caller has
+        them (the form-factor engine's, whose gather weights name them), else made here."""
         tri_patch = np.repeat(mesh.triangle_patch, 3)
         receiver = mesh.triangle_receivers.reshape(-1)
         weight = np.repeat(mesh.triangle_area / 3.0, 3) / mesh.patch_area[tri_patch]
@@ -64,7 +66,7 @@ class DiscreteSystem:
             entry_receiver=r,
             patch_entries=by_patch,
             patch_ptr=np.searchsorted(entry_patch[by_patch], np.arange(mesh.patch_count + 1)),
-            subarea_means=subarea_means(mesh),
+            subarea_means=subarea_means(mesh) if means is None else means,
             patch_subareas=np.searchsorted(mesh.subarea_patch, np.arange(mesh.patch_count + 1)),
             scratch=np.zeros((mesh.receiver_count + mesh.subarea_count, 3)),
         )

@@ -762,6 +762,10 @@ class ScaledEngine:
     def rays_cast(self) -> int:
         return int(self.engine.rays_cast)
 
+    @property
+    def subarea_means(self) -> Any:
+        return self.engine.subarea_means
+
     def column(self, patch: int) -> Column:
         column = self.engine.column(patch)
         return Column(column.receivers, column.factors * self.factor, column.rays)
