@@ -5,7 +5,8 @@ Three tables:
 
 1. **Pass against raw Embree.** The Cornell box's form-factor pass (every column, as
    ``raytrad render`` computes it before the first shot) is timed with its rays
-   recorded, with shaft culling (the default) and tracing every pair; each pass's rays
+   recorded, with shaft culling and convex blockers (the default), with shaft culling
+   alone and tracing every pair; each pass's rays
    are then replayed through embreex's occlusion query, with the same threads, in the
    same process. The last column sets each pass against raw Embree doing the unculled
    pass's job: above 100% the pass finishes the job faster than Embree alone traces it.
@@ -43,7 +44,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-from raytrad.core import pipeline, solver  # noqa: E402
+from raytrad.core import pairs, pipeline, solver  # noqa: E402
 from raytrad.core.mesh import MeshSettings  # noqa: E402
 from raytrad.core.pipeline import prepare  # noqa: E402
 from raytrad.core.visibility import Occluder  # noqa: E402
@@ -57,8 +58,11 @@ _MEASURE = (
 )
 
 
-def timed_pass(receivers: int, record: bool, cull: bool = True) -> tuple[float, object, list]:
-    """(seconds of the form-factor pass, the prepared scene, recorded ray batches)."""
+def timed_pass(
+    receivers: int, record: bool, cull: bool = True, convex: bool = True
+) -> tuple[float, object, list]:
+    """(seconds of the form-factor pass, the prepared scene, recorded ray batches);
+    ``convex`` False leaves the convex blockers out (shaft culling alone)."""
     batches: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
     original = Occluder.occluded_local
 
@@ -70,11 +74,15 @@ def timed_pass(receivers: int, record: bool, cull: bool = True) -> tuple[float, 
     Occluder.occluded_local = recording  # type: ignore[method-assign]
     engine = pipeline.FormFactorEngine
     pipeline.FormFactorEngine = functools.partial(engine, cull=cull)  # type: ignore[misc]
+    find = pairs.blockers
+    if not convex:
+        pairs.blockers = lambda *_: None  # type: ignore[assignment]
     try:
         prepared = prepare(cornell_box(), MeshSettings(receivers=receivers))
     finally:
         Occluder.occluded_local = original  # type: ignore[method-assign]
         pipeline.FormFactorEngine = engine  # type: ignore[misc]
+        pairs.blockers = find
     return prepared.timings["form_factors"], prepared, batches
 
 
@@ -138,9 +146,14 @@ def pass_table(receivers: int) -> None:
     finally:
         every.close()
     del every_batches
+    shafts_seconds, shafts_only, _ = timed_pass(receivers, record=False, convex=False)
+    shafts_rays = shafts_only.engine.rays_cast  # type: ignore[attr-defined]
+    shafts_worst = _worst(shafts_only, factors)
+    shafts_only.close()
     os.environ["RAYTRAD_KERNELS"] = "numpy"
     try:
         numpy_seconds, reference, _ = timed_pass(receivers, record=False)
+        numpy_rays = reference.engine.rays_cast  # type: ignore[attr-defined]
         worst = _worst(reference, factors)
         reference.close()
     finally:
@@ -154,10 +167,15 @@ def pass_table(receivers: int) -> None:
     print("|---|---|---|---|---|")
     rows = [
         ("raw embreex occlusion, every ray of the unculled pass", every_embree, every_rays),
-        ("raw embreex occlusion, the culled pass's rays", embree, rays),
-        ("raytrad pass, every pair traced (no shaft culling)", every_seconds, every_rays),
-        ("raytrad pass, shaft culling (default)", seconds, rays),
-        ("raytrad pass, shaft culling, numpy kernels", numpy_seconds, rays),
+        ("raw embreex occlusion, the default pass's rays", embree, rays),
+        (
+            "raytrad pass, every pair traced (no shaft culling, no blockers)",
+            every_seconds,
+            every_rays,
+        ),
+        ("raytrad pass, shaft culling, no convex blockers", shafts_seconds, shafts_rays),
+        ("raytrad pass, shaft culling and convex blockers (default)", seconds, rays),
+        ("raytrad pass, numpy kernels (shaft culling only)", numpy_seconds, numpy_rays),
     ]
     for name, took, count in rows:
         print(
@@ -165,9 +183,10 @@ def pass_table(receivers: int) -> None:
             f"{100 * every_embree / took:.0f}% |"
         )
     print(
-        f"culled / unculled pass time: {seconds / every_seconds:.2f}; compiled / numpy: "
+        f"default / unculled pass time: {seconds / every_seconds:.2f}; default / shafts "
+        f"alone: {seconds / shafts_seconds:.2f}; compiled / numpy: "
         f"{seconds / numpy_seconds:.2f}; largest factor difference (every 7th column) "
-        f"unculled {every_worst:.1e}, numpy kernels {worst:.1e}"
+        f"unculled {every_worst:.1e}, shafts alone {shafts_worst:.1e}, numpy kernels {worst:.1e}"
     )
     print(
         f"\nsolve over the cached columns ({shots} shots): compiled shot {solve_fast:.2f} s "

@@ -21,6 +21,7 @@ import numpy as np
 
 from raytrad.constants import tol
 from raytrad.core import compiled
+from raytrad.core.blockers import Blockers, blockers, target_corners
 from raytrad.core.contour import (
     clipped_contour_form_factor,
     contour_form_factor,
@@ -109,7 +110,34 @@ class PairFactors:
                 ]
             )
             self._patch_reach = mesh.patch_radius + lift + tol.horizon * diagonal
+        self.blockers: Blockers | None = None
+        if self.facets is not None and occluder is not None:  # (so also only compiled)
+            self.blockers = blockers(occluder.positions, occluder.triangles, diagonal)
+        if self.blockers is not None:
+            self._target_corners()
         self._triangle_tables()
+
+    def _target_corners(self) -> None:
+        """Each patch's :func:`~raytrad.core.blockers.target_corners` (CSR, from its
+        outline's corners, or its pieces' for a folded patch) and the radius of a ball
+        about its centre that holds them."""
+        m, lift = self.mesh, tol.ray_offset * self.diagonal
+        pieces, parts = self._pieces, []
+        for p in range(m.patch_count):
+            if m.patch_planar[p]:
+                outline = self._edge_start[self._edge_ptr[p] : self._edge_ptr[p + 1]]
+                parts.append(target_corners(outline, m.patch_normal[p], lift))
+            else:
+                first, last = (
+                    pieces.edge_ptr[pieces.patch_ptr[p]],
+                    pieces.edge_ptr[pieces.patch_ptr[p + 1]],
+                )
+                parts.append(target_corners(pieces.start[first:last], None, lift))
+        self._corner_ptr = np.concatenate([[0], np.cumsum([len(c) for c in parts])])
+        self._corners = np.concatenate(parts)
+        self._corner_reach = np.array(
+            [np.linalg.norm(c - m.patch_center[p], axis=1).max() for p, c in enumerate(parts)]
+        )
 
     def _triangle_tables(self) -> None:
         """The tables that follow the mesh's triangles (rebuilt on a refined mesh)."""
@@ -166,8 +194,9 @@ class PairFactors:
         :data:`NEAR_FACTOR` sizes, through each of their triangles weighted exactly. Only
         receivers whose shaft to the patch an occluder may cross are traced (``sides``, the
         origins' packed facet bits from :meth:`sides`; None traces every receiver, see
-        :mod:`raytrad.core.shafts`); samples are taken for those and for the near
-        receivers' gather weights.
+        :mod:`raytrad.core.shafts`), and of those only the ones no convex occluder hides
+        wholly (:mod:`raytrad.core.blockers`: their factor is 0 without a ray); samples
+        are taken for the traced receivers and for the near receivers' gather weights.
         """
         m = self.mesh
         unoccluded = self._unoccluded(x, nx, patch)
@@ -175,8 +204,6 @@ class PairFactors:
         sub = m.patch_subareas(patch)
         with self._count_lock:
             self.naive_rays += int(sees.sum()) * (sub.stop - sub.start)
-        distance = np.linalg.norm(x - m.patch_center[patch], axis=1)
-        close = sees & (distance < GATHER_RADII * m.patch_radius[patch])
         doubt = sees if self.occluder is not None else np.zeros_like(sees)
         if self.facets is not None and sides is not None and doubt.any():
             doubt = doubt & ~self.facets.clear(
@@ -186,6 +213,19 @@ class PairFactors:
                 m.patch_center[patch],
                 float(self._patch_reach[patch]),
             )
+        if self.blockers is not None and doubt.any():
+            hidden = np.zeros_like(doubt)
+            hidden[doubt] = self.blockers.blocked(
+                origins[doubt],
+                self._corners[self._corner_ptr[patch] : self._corner_ptr[patch + 1]],
+                m.patch_center[patch],
+                float(self._corner_reach[patch]),
+            )
+            unoccluded = np.where(hidden, 0.0, unoccluded)
+            sees &= ~hidden
+            doubt &= ~hidden
+        distance = np.linalg.norm(x - m.patch_center[patch], axis=1)
+        close = sees & (distance < GATHER_RADII * m.patch_radius[patch])
         sampled = doubt | close
         if not sampled.any():
             return unoccluded, 0, EMPTY

@@ -1,0 +1,126 @@
+"""The convex-blocker test behind :mod:`raytrad.core.compiled`, written for numba (imported
+only there). Plain Python as written here; :func:`raytrad.core.compiled.get` compiles
+every function in :data:`KERNELS`. It computes what its numpy reference,
+:func:`raytrad.core.blockers.numpy_blocked`, computes; see there for shapes and units.
+"""
+
+# mypy: ignore-errors
+
+import math
+
+import numpy as np
+
+#: Every function to compile, each after the helpers it calls.
+KERNELS = ("_heights", "_sheet_hides", "_solid_hides", "blocked_pairs")
+
+FACE, HOLE, SHEET, EDGE = 0, 1, 2, 3
+
+
+def _heights(points, normal, offset):
+    """(K, N) signed heights of points above each plane [m]."""
+    out = np.empty((len(offset), len(points)))
+    for k in range(len(offset)):
+        for i in range(len(points)):
+            p = points[i]
+            out[k, i] = p[0] * normal[k, 0] + p[1] * normal[k, 1] + p[2] * normal[k, 2] - offset[k]
+    return out
+
+
+def _sheet_hides(h_o, h_v, kind, lo, hi, margin):
+    """Whether the sheet of planes ``lo:hi`` hides every corner (heights ``h_v`` (K, V))
+    from an origin (heights ``h_o`` (K,)): the corners on the other side of its plane,
+    each segment crossing it inside the shrunk edges."""
+    s = lo
+    while kind[s] != SHEET:
+        s += 1
+    if abs(h_o[s]) < margin:
+        return False
+    for v in range(h_v.shape[1]):
+        if (h_o[s] > 0 and h_v[s, v] > -margin) or (h_o[s] < 0 and h_v[s, v] < margin):
+            return False
+    for v in range(h_v.shape[1]):
+        t = h_o[s] / (h_o[s] - h_v[s, v])
+        for k in range(lo, hi):
+            if kind[k] == EDGE and h_o[k] + t * (h_v[k, v] - h_o[k]) > -margin:
+                return False
+    return True
+
+
+def _solid_hides(h_o, h_v, kind, lo, hi, margin, lift, gap):
+    """Whether the solid of planes ``lo:hi``, shrunk by ``margin``, meets every segment
+    from an origin to a corner (heights as :func:`_sheet_hides`), with the origin
+    outside it and the blocking point more than two ray offsets from the rays' ends."""
+    outside = False
+    for k in range(lo, hi):
+        if kind[k] == FACE and h_o[k] >= 2.0 * margin:
+            outside = True
+        if kind[k] == HOLE and h_o[k] > -margin:
+            return False
+    if not outside:
+        return False
+    latest = 0.0
+    for v in range(h_v.shape[1]):
+        enter, leave = 0.0, 1.0
+        for k in range(lo, hi):
+            start = h_o[k] + margin
+            slope = (h_v[k, v] + margin) - start
+            if slope < 0.0:
+                enter = max(enter, -start / slope)
+            elif slope > 0.0:
+                leave = min(leave, -start / slope)
+            elif start > 0.0:
+                return False
+        if enter > leave:
+            return False
+        latest = max(latest, enter)
+    return (1.0 - latest) * gap >= 2.0 * lift
+
+
+def blocked_pairs(
+    origins,
+    corners,
+    patch_center,
+    reach,
+    normal,
+    offset,
+    kind,
+    plane_ptr,
+    center,
+    radius,
+    margin,
+    lift,
+):
+    """(N,) bool: origins from which one blocker hides every corner (see
+    :func:`raytrad.core.blockers.numpy_blocked`)."""
+    out = np.zeros(len(origins), dtype=np.bool_)
+    h_v = _heights(corners, normal, offset)
+    h_o = np.empty(len(offset))
+    for i in range(len(origins)):
+        o = origins[i]
+        dx = patch_center[0] - o[0]
+        dy = patch_center[1] - o[1]
+        dz = patch_center[2] - o[2]
+        length2 = dx * dx + dy * dy + dz * dz
+        gap = math.sqrt(length2) - reach
+        for b in range(len(radius)):
+            cx, cy, cz = center[b, 0] - o[0], center[b, 1] - o[1], center[b, 2] - o[2]
+            t = (cx * dx + cy * dy + cz * dz) / length2 if length2 > 0.0 else 0.0
+            t = min(max(t, 0.0), 1.0)
+            ex, ey, ez = cx - t * dx, cy - t * dy, cz - t * dz
+            if math.sqrt(ex * ex + ey * ey + ez * ez) > radius[b] + reach:
+                continue
+            lo, hi = plane_ptr[b], plane_ptr[b + 1]
+            for k in range(lo, hi):
+                h_o[k] = o[0] * normal[k, 0] + o[1] * normal[k, 1] + o[2] * normal[k, 2] - offset[k]
+            sheet = False
+            for k in range(lo, hi):
+                if kind[k] == SHEET:
+                    sheet = True
+            if sheet:
+                hides = _sheet_hides(h_o, h_v, kind, lo, hi, margin)
+            else:
+                hides = _solid_hides(h_o, h_v, kind, lo, hi, margin, lift, gap)
+            if hides:
+                out[i] = True
+                break
+    return out

@@ -1,0 +1,369 @@
+"""Convex blockers: the (receiver, patch) pairs that one occluder hides wholly, found
+before tracing.
+
+Shaft culling (:mod:`raytrad.core.shafts`) finds the pairs nothing can block; this finds
+the opposite kind. A pair is *blocked* when every segment from the receiver's ray origin
+to any ray target on the patch passes through one convex occluder. Such a pair's traced
+samples would all be blocked, so its factor is 0 and it needs no ray and no sample.
+
+The occluders are the blocking triangles' connected components that are convex:
+
+* a *solid*: a convex closed surface (a box), or a convex surface open along one planar
+  loop (a box standing on the floor without its bottom face). The open face counts as a
+  *hole*: a segment that enters the solid through a face (never through the hole, as
+  the origin is on the inner side of the hole's plane) hits that face;
+* a *sheet*: a planar component whose triangles cover their convex hull (a one-sided
+  quad).
+
+The test rests on convexity twice. If the segments from a point ``o`` to each corner
+``v_i`` of a point set meet a convex set ``C``, at ``q_i``, then the segment from ``o``
+to any ``p`` in the set's convex hull meets it too: with ``p = sum l_i v_i`` and
+``q_i = o + t_i (v_i - o)``, the point ``o + (p - o) / S``, ``S = sum l_i / t_i >= 1``,
+is the convex combination of the ``q_i`` with weights ``l_i / (t_i S)``, so it lies in
+``C`` and on the segment. The corners are those of a hull of the patch's ray targets (its
+vertices' convex hull, lifted both ways off its plane by twice the targets' own lift), so
+every target is covered; and ``C`` is the occluder shrunk by a margin (a few ray offsets),
+so the float32 rays Embree traces cross it with room to spare. A pair is called blocked
+only when also
+
+* the origin is outside the solid by twice the margin (through a face, not the hole),
+  and on the inner side of the hole's plane, or on one side of a sheet's plane by the
+  margin with every corner on the other side by the margin; and
+* for a solid, the blocking point is further than twice the ray offset from the ray's
+  end (rays stop half an offset short of their target), bounded below from the corners'
+  parameters and the patch's distance.
+
+The test is conservative: a blocked pair is one whose samples the unculled pass traces
+as all blocked, so its factors and gather weights are the unculled pass's exactly (zero);
+``tests/core/test_blockers.py`` checks both, and that partly visible pairs never count.
+Convex components are common in modelled scenes (boxes, slabs, table tops, partitions);
+a non-convex component (an L-shaped wall, a chair modelled as one mesh) blocks nothing
+here, and its pairs are traced as before.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+
+import numpy as np
+
+from raytrad.constants import tol
+from raytrad.core import compiled
+from raytrad.core.shafts import _plane_hull
+
+log = logging.getLogger(__name__)
+
+#: Plane kinds: a solid's face, a solid's hole (its open planar loop), a sheet's plane,
+#: and a sheet's edge (perpendicular to its plane, outward).
+FACE, HOLE, SHEET, EDGE = 0, 1, 2, 3
+#: Components with more triangles than this are not considered (the blockers are sought
+#: only where shaft culling runs, among at most a few hundred planar facets).
+MAX_TRIANGLES = 20_000
+
+
+@dataclass(frozen=True)
+class Blockers:
+    """Convex occluders, each a list of planes (CSR).
+
+    Attributes
+    ----------
+    normal : (K, 3) float64
+        Unit plane normals, outward (for a sheet's plane: either side) [1].
+    offset : (K,) float64
+        ``normal . p = offset`` on the plane [m].
+    kind : (K,) int64
+        :data:`FACE`, :data:`HOLE`, :data:`SHEET` or :data:`EDGE`.
+    plane_ptr : (B + 1,) int64
+        Each blocker's planes.
+    center : (B, 3) float64, radius : (B,) float64
+        Bounding spheres [m].
+    margin : float
+        The shrink margin [m]: the test's occluder lies this far inside the real one.
+    lift : float
+        The ray offset [m]: targets lie within it of their patch; rays stop half of it
+        short of their target.
+    """
+
+    normal: np.ndarray
+    offset: np.ndarray
+    kind: np.ndarray
+    plane_ptr: np.ndarray
+    center: np.ndarray
+    radius: np.ndarray
+    margin: float
+    lift: float
+
+    @property
+    def count(self) -> int:
+        return len(self.radius)
+
+    def blocked(
+        self, origins: np.ndarray, corners: np.ndarray, patch_center: np.ndarray, reach: float
+    ) -> np.ndarray:
+        """(N,) bool: the ray origins from which one blocker hides every ray target of a
+        patch.
+
+        Parameters
+        ----------
+        origins : (N, 3) float64
+            Ray origins [m].
+        corners : (V, 3) float64
+            Corners of a convex set holding every ray target of the patch
+            (:func:`target_corners`) [m].
+        patch_center : (3,) float64, reach : float
+            A ball holding those corners [m].
+        """
+        args = (origins, corners, patch_center, reach, self)
+        fast = compiled.get()
+        if fast is None or len(origins) == 0:
+            return numpy_blocked(*args)
+        return np.asarray(
+            fast.blocked_pairs(
+                np.ascontiguousarray(origins, dtype=np.float64),
+                np.ascontiguousarray(corners, dtype=np.float64),
+                np.ascontiguousarray(patch_center, dtype=np.float64),
+                float(reach),
+                self.normal,
+                self.offset,
+                self.kind,
+                self.plane_ptr,
+                self.center,
+                self.radius,
+                self.margin,
+                self.lift,
+            ),
+            dtype=bool,
+        )
+
+
+def numpy_blocked(
+    origins: np.ndarray,
+    corners: np.ndarray,
+    patch_center: np.ndarray,
+    reach: float,
+    blockers: Blockers,
+) -> np.ndarray:
+    """The numpy reference of :meth:`Blockers.blocked` (same arguments, same result)."""
+    o = np.asarray(origins, dtype=np.float64).reshape(-1, 3)
+    v = np.asarray(corners, dtype=np.float64).reshape(-1, 3)
+    out = np.zeros(len(o), dtype=bool)
+    gap = np.linalg.norm(o - patch_center, axis=1) - reach  # nearest target, at least
+    m, lift = blockers.margin, blockers.lift
+    for b in range(blockers.count):
+        todo = ~out & _segment_meets_ball(
+            o, patch_center, blockers.center[b], blockers.radius[b] + reach
+        )
+        if not todo.any():
+            continue
+        planes = slice(blockers.plane_ptr[b], blockers.plane_ptr[b + 1])
+        n, d, kind = blockers.normal[planes], blockers.offset[planes], blockers.kind[planes]
+        h_o = o[todo] @ n.T - d  # (C, K)
+        h_v = v @ n.T - d  # (V, K)
+        if (kind == SHEET).any():
+            s = int(np.flatnonzero(kind == SHEET)[0])
+            above = (h_o[:, s] >= m) & (h_v[:, s] <= -m).all()
+            below = (h_o[:, s] <= -m) & (h_v[:, s] >= m).all()
+            ok = above | below
+            edges = kind == EDGE
+            # where each segment crosses the sheet's plane: o + t (v - o), t = h_o / (h_o - h_v)
+            t = h_o[:, s][:, None] / np.where(
+                ok[:, None], h_o[:, s][:, None] - h_v[None, :, s], 1.0
+            )
+            crossing = h_o[:, None, edges] + t[:, :, None] * (
+                h_v[None, :, edges] - h_o[:, None, edges]
+            )
+            ok &= (crossing <= -m).all(axis=(1, 2))
+        else:
+            faces, holes = kind == FACE, kind == HOLE
+            ok = (h_o[:, faces] >= 2.0 * m).any(axis=1) & (h_o[:, holes] <= -m).all(axis=1)
+            # Cyrus-Beck: each segment's parameters inside the shrunk planes
+            start = h_o + m  # (C, K): o against the shrunk planes
+            slope = (h_v + m)[None, :, :] - start[:, None, :]  # (C, V, K)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                t = -start[:, None, :] / slope
+            enter = np.where(slope < 0, t, 0.0).max(axis=2).clip(0.0, None)
+            leave = np.where(slope > 0, t, 1.0).min(axis=2).clip(None, 1.0)
+            parallel_out = ((slope == 0) & (start[:, None, :] > 0)).any(axis=2)
+            ok &= ((enter <= leave) & ~parallel_out).all(axis=1)
+            ok &= (1.0 - enter.max(axis=1, initial=0.0)) * gap[todo] >= 2.0 * lift
+        out[np.flatnonzero(todo)[ok]] = True
+    return out
+
+
+def _segment_meets_ball(
+    o: np.ndarray, p: np.ndarray, center: np.ndarray, radius: float
+) -> np.ndarray:
+    """(N,) bool: the segments from ``o`` (N, 3) to ``p`` (3,) pass within ``radius`` of
+    ``center``."""
+    d = p - o
+    length2 = np.einsum("ij,ij->i", d, d)
+    t = np.clip(np.einsum("ij,ij->i", center - o, d) / np.where(length2 > 0, length2, 1.0), 0, 1)
+    nearest = o + t[:, None] * d
+    return np.linalg.norm(nearest - center, axis=1) <= radius
+
+
+def blockers(positions: np.ndarray, triangles: np.ndarray, diagonal: float) -> Blockers | None:
+    """The convex components of the blocking triangles as :class:`Blockers` (None: none).
+
+    Corners within ``tol.horizon`` x ``diagonal`` of each other are one vertex; a
+    component is convex when every vertex is within that of the back of each of its
+    triangles' planes (oriented outward), closed or open along one planar loop, and no
+    edge joins more than two triangles; a planar component is a sheet when its triangles'
+    areas sum to its convex hull's.
+
+    Parameters
+    ----------
+    positions : (V, 3) float64 [m]
+    triangles : (T, 3) int
+    diagonal : float
+        The scene's diagonal [m].
+    """
+    corners = np.asarray(positions, dtype=np.float64)[np.asarray(triangles)]
+    flat = tol.horizon * diagonal
+    normal = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+    area2 = np.linalg.norm(normal, axis=1)
+    corners = corners[area2 > 0]
+    if not 0 < len(corners) <= MAX_TRIANGLES:
+        return None
+    _, index = np.unique(np.round(corners.reshape(-1, 3) / flat), axis=0, return_inverse=True)
+    welded = index.reshape(-1, 3)
+    points = np.zeros((int(welded.max()) + 1, 3))
+    points[welded.reshape(-1)] = corners.reshape(-1, 3)
+    planes: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
+    spheres: list[tuple[np.ndarray, float]] = []
+    for part in _components(welded, len(points)):
+        found = _convex(points, welded[part], flat)
+        if found is not None:
+            planes.append(found)
+            used = points[np.unique(welded[part])]
+            center = 0.5 * (used.min(axis=0) + used.max(axis=0))
+            spheres.append((center, float(np.linalg.norm(used - center, axis=1).max()) + flat))
+    if not planes:
+        return None
+    log.debug("%d convex blockers", len(planes))
+    return Blockers(
+        np.concatenate([p[0] for p in planes]),
+        np.concatenate([p[1] for p in planes]),
+        np.concatenate([p[2] for p in planes]).astype(np.int64),
+        np.concatenate([[0], np.cumsum([len(p[1]) for p in planes])]).astype(np.int64),
+        np.array([s[0] for s in spheres]),
+        np.array([s[1] for s in spheres]),
+        MARGIN * tol.ray_offset * diagonal,
+        tol.ray_offset * diagonal,
+    )
+
+
+#: The shrink margin in ray offsets (:attr:`Blockers.margin`).
+MARGIN = 2.0
+
+
+def _components(triangles: np.ndarray, vertex_count: int) -> list[np.ndarray]:
+    """Triangle indices of each connected component (sharing a vertex)."""
+    parent = np.arange(vertex_count)
+
+    def root(i: int) -> int:
+        while parent[i] != i:
+            parent[i] = parent[parent[i]]
+            i = int(parent[i])
+        return i
+
+    for a, b, c in triangles.tolist():
+        ra, rb, rc = root(a), root(b), root(c)
+        top = min(ra, rb, rc)
+        parent[ra] = parent[rb] = parent[rc] = top
+    label = np.array([root(i) for i in triangles[:, 0].tolist()])
+    order = np.argsort(label, kind="stable")
+    cuts = np.flatnonzero(np.diff(label[order])) + 1
+    return np.split(order, cuts)
+
+
+def _convex(
+    points: np.ndarray, triangles: np.ndarray, flat: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+    """A component's planes (normals, offsets, kinds) if it is a convex blocker."""
+    edges = np.sort(triangles[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
+    unique, count = np.unique(edges, axis=0, return_counts=True)
+    if (count > 2).any():
+        return None
+    used = np.unique(triangles)
+    corners = points[triangles]
+    normal = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+    area = 0.5 * np.linalg.norm(normal, axis=1)
+    normal /= (2.0 * area)[:, None]
+    offset = np.einsum("tj,tj->t", normal, corners[:, 0])
+    height = points[used] @ normal.T - offset  # (U, T)
+    if (np.abs(height) <= flat).all():
+        return _sheet(points[used], normal[0], float(offset[0]), float(area.sum()), flat)
+    sign = np.where(
+        height.max(axis=0) <= flat, 1.0, np.where(height.min(axis=0) >= -flat, -1.0, 0.0)
+    )
+    if (sign == 0).any():
+        return None
+    normal, offset = normal * sign[:, None], offset * sign
+    key = np.round(np.concatenate([normal / 1e-9, (offset / flat)[:, None]], axis=1))
+    _, first = np.unique(key, axis=0, return_index=True)
+    normal, offset = normal[first], offset[first]
+    kind = np.full(len(offset), FACE)
+    rim = unique[count == 1]
+    if len(rim):
+        hole = _hole(points[np.unique(rim)], points[used], flat)
+        if hole is None:
+            return None
+        normal = np.vstack([normal, hole[0]])
+        offset = np.append(offset, hole[1])
+        kind = np.append(kind, HOLE)
+    return normal, offset, kind
+
+
+def _hole(rim: np.ndarray, points: np.ndarray, flat: float) -> tuple[np.ndarray, float] | None:
+    """The outward plane of a convex surface's open loop, if the loop is planar and the
+    surface lies on one side of it."""
+    mean = rim.mean(axis=0)
+    normal = np.linalg.svd(rim - mean)[2][-1]
+    offset = float(normal @ mean)
+    if np.abs(rim @ normal - offset).max() > flat:
+        return None
+    height = points @ normal - offset
+    if height.max() <= flat and height.min() < -flat:
+        return normal, offset
+    if height.min() >= -flat and height.max() > flat:
+        return -normal, -offset
+    return None
+
+
+def _sheet(
+    points: np.ndarray, normal: np.ndarray, offset: float, area: float, flat: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+    """A planar component's sheet plane and outward edge planes, if its triangles cover
+    their convex hull."""
+    hull = _plane_hull(points, normal)
+    following = np.roll(hull, -1, axis=0)
+    hull_area = 0.5 * float(
+        np.linalg.norm(np.cross(hull - hull[0], following - hull[0]).sum(axis=0))
+    )
+    if abs(hull_area - area) > 1e-9 * max(area, 1e-300) + flat * np.sqrt(area):
+        return None
+    # _plane_hull winds counter-clockwise about ``normal``: edge x normal points outward
+    edge = following - hull
+    outward = np.cross(edge, normal)
+    outward /= np.linalg.norm(outward, axis=1)[:, None]
+    return (
+        np.vstack([normal, outward]),
+        np.concatenate([[offset], np.einsum("kj,kj->k", outward, hull)]),
+        np.concatenate([[SHEET], np.full(len(hull), EDGE)]),
+    )
+
+
+def target_corners(vertices: np.ndarray, normal: np.ndarray | None, lift: float) -> np.ndarray:
+    """(V', 3) corners of a convex set that holds every ray target of a patch: the convex
+    hull of its vertices moved ``2 lift`` both ways along its normal (``normal`` None, a
+    folded patch: each vertex moved ``2 lift`` along each axis both ways)."""
+    if normal is not None:
+        hull = _plane_hull(vertices, normal)
+        return np.concatenate([hull + 2.0 * lift * normal, hull - 2.0 * lift * normal])
+    cube = 2.0 * lift * np.array(np.meshgrid([-1, 1], [-1, 1], [-1, 1])).reshape(3, -1).T
+    return (np.unique(vertices, axis=0)[:, None, :] + cube[None, :, :]).reshape(-1, 3)
+
+
+__all__ = ["Blockers", "blockers", "numpy_blocked", "target_corners"]

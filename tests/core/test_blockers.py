@@ -1,0 +1,305 @@
+"""Convex blockers (raytrad.core.blockers): which components count, the compiled test
+against its numpy reference, and that a pair called blocked is blocked for Embree too:
+every random segment from its ray origin to its patch, in the issue's constructed cases
+(a receiver peeking past an occluder's edge, a thin occluder between parallel plates, an
+occluder touching the shaft's boundary, one wholly inside the shaft) and in rooms of
+turned blocks. The form-factor pass with blockers gives the pass without them."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from raytrad.constants import tol
+from raytrad.core import blockers as bl
+from raytrad.core import compiled
+from raytrad.core.formfactor import FormFactorEngine
+from raytrad.core.mesh import MeshSettings
+from raytrad.core.visibility import Occluder
+from raytrad.scene.builtin import shadow_scene
+
+from .test_shafts import furniture_room
+
+DIAGONAL = 10.0
+LIFT = tol.ray_offset * DIAGONAL
+
+
+def quad_triangles(quad: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    return np.asarray(quad, dtype=float), np.array([[0, 1, 2], [0, 2, 3]])
+
+
+def box(
+    center: np.ndarray, half: np.ndarray, angle: float = 0.0, bottom: bool = True
+) -> tuple[np.ndarray, np.ndarray]:
+    """A box turned ``angle`` about y: its 8 corners and 12 (10 without the bottom)
+    triangles, wound outward."""
+    signs = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)], float)
+    c, s = np.cos(angle), np.sin(angle)
+    turn = np.array([[c, 0, s], [0, 1, 0], [-s, 0, c]])
+    points = center + (signs * half) @ turn.T
+    faces = [
+        [0, 1, 3, 2],  # x-
+        [4, 6, 7, 5],  # x+
+        [2, 3, 7, 6],  # y+
+        [0, 2, 6, 4],  # z-
+        [1, 5, 7, 3],  # z+
+    ]
+    if bottom:
+        faces.append([0, 4, 5, 1])  # y-
+    triangles = [[f[0], f[1], f[2]] for f in faces] + [[f[0], f[2], f[3]] for f in faces]
+    return points, np.array(triangles)
+
+
+def join(*parts: tuple[np.ndarray, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+    points, triangles, base = [], [], 0
+    for p, t in parts:
+        points.append(p)
+        triangles.append(t + base)
+        base += len(p)
+    return np.concatenate(points), np.concatenate(triangles)
+
+
+def test_closed_and_open_boxes_are_solids() -> None:
+    closed = bl.blockers(*box(np.zeros(3), np.ones(3)), DIAGONAL)
+    assert closed is not None and closed.count == 1
+    assert sorted(closed.kind.tolist()) == [bl.FACE] * 6
+    np.testing.assert_allclose(np.abs(closed.offset), 1.0, atol=1e-12)
+    # every corner is on or behind every outward plane
+    corners = box(np.zeros(3), np.ones(3))[0]
+    assert (corners @ closed.normal.T - closed.offset <= 1e-12).all()
+    open_box = bl.blockers(*box(np.array([0, 1, 0.0]), np.ones(3), 0.3, bottom=False), DIAGONAL)
+    assert open_box is not None and open_box.count == 1
+    assert sorted(open_box.kind.tolist()) == [bl.FACE] * 5 + [bl.HOLE]
+    hole = open_box.kind == bl.HOLE
+    np.testing.assert_allclose(open_box.normal[hole][0], [0, -1, 0], atol=1e-12)
+    np.testing.assert_allclose(open_box.offset[hole], 0.0, atol=1e-12)
+    two = bl.blockers(
+        *join(box(np.zeros(3), np.ones(3)), box(np.full(3, 5.0), np.ones(3))), DIAGONAL
+    )
+    assert two is not None and two.count == 2
+
+
+def test_non_convex_components_block_nothing() -> None:
+    l_walls = join(
+        quad_triangles([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]]),
+        quad_triangles([[0, 0, 0], [0, 1, 0], [0, 1, 1], [0, 0, 1]]),
+    )
+    # welded into one component: its open rim is not planar
+    assert bl.blockers(*l_walls, DIAGONAL) is None
+    tube_points, tube_triangles = box(np.zeros(3), np.ones(3), bottom=False)
+    keep = ~np.isin(np.arange(len(tube_triangles)), [2, 7])  # no top either: two rims
+    assert bl.blockers(tube_points, tube_triangles[keep], DIAGONAL) is None
+    l_sheet = np.array([[0, 0, 0], [2, 0, 0], [2, 0, 1], [1, 0, 1], [1, 0, 2], [0, 0, 2.0]])
+    assert (
+        bl.blockers(l_sheet, np.array([[0, 1, 2], [0, 2, 3], [0, 3, 4], [0, 4, 5]]), DIAGONAL)
+        is None
+    )
+    square = bl.blockers(*quad_triangles([[0, 0, 0], [1, 0, 0], [1, 0, 1], [0, 0, 1]]), DIAGONAL)
+    assert square is not None and sorted(square.kind.tolist()) == [bl.SHEET] + [bl.EDGE] * 4
+
+
+def trace(occluder: Occluder, origin: np.ndarray, targets: np.ndarray) -> np.ndarray:
+    """Embree on the segments from ``origin`` to ``targets``, as the pass traces them."""
+    d = targets - origin
+    length = np.linalg.norm(d, axis=1)
+    return occluder.occluded_local(
+        np.repeat((origin - occluder.origin)[None, :], len(d), axis=0),
+        d / length[:, None],
+        length - 0.5 * LIFT,
+    )
+
+
+def quad_targets(quad: np.ndarray, count: int, rng: np.random.Generator) -> np.ndarray:
+    """Random points of a planar quad, lifted ``LIFT`` along its normal (as ray targets)."""
+    normal = np.cross(quad[1] - quad[0], quad[3] - quad[0])
+    normal /= np.linalg.norm(normal)
+    u, v = rng.random((2, count, 1))
+    edge = quad[0] + u * (quad[1] - quad[0])
+    far = quad[3] + u * (quad[2] - quad[3])
+    return edge + v * (far - edge) + LIFT * normal
+
+
+def classify(
+    found: bl.Blockers, origins: np.ndarray, quad: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """(compiled or numpy, numpy) blocked flags of origins against a quad patch."""
+    normal = np.cross(quad[1] - quad[0], quad[3] - quad[0])
+    corners = bl.target_corners(quad, normal / np.linalg.norm(normal), LIFT)
+    center = quad.mean(axis=0)
+    reach = float(np.linalg.norm(corners - center, axis=1).max())
+    return (
+        found.blocked(origins, corners, center, reach),
+        bl.numpy_blocked(origins, corners, center, reach, found),
+    )
+
+
+#: The constructed cases: an occluder, a patch behind it (a quad), receivers' ray origins
+#: on a line, and whether some but not all of them must be blocked (True), none while
+#: every one sees part of the patch (False), or none (None).
+PATCH = np.array([[-1, 0, 4], [1, 0, 4], [1, 2, 4], [-1, 2, 4.0]])
+PLATE = np.array([[-1, 0, 4], [-1, 2, 4], [1, 2, 4], [1, 0, 4.0]])  # facing -z
+SWEEP = np.column_stack([np.linspace(-4, 4, 161), np.full(161, 1.0), np.zeros(161)])
+CASES = {
+    # a box between, receivers sliding sideways: some peek past its edge
+    "peeking past an edge": (
+        box(np.array([0, 1, 2.0]), np.array([1.2, 1.4, 0.3])),
+        PLATE,
+        SWEEP,
+        True,
+    ),
+    # a thin occluder (a sheet) between parallel plates, larger than the plate's shadow
+    # only in the middle
+    "thin sheet between plates": (
+        quad_triangles(
+            np.array([[-0.8, -0.2, 2], [0.8, -0.2, 2], [0.8, 2.2, 2], [-0.8, 2.2, 2.0]])
+        ),
+        PLATE,
+        SWEEP * [0.5, 1, 1],
+        True,
+    ),
+    # a sheet whose edge lies on the shaft's side: the segments to the patch's edge
+    # graze it (Embree may call them either way), so the pair is not blocked
+    "touching the shaft's boundary": (
+        quad_triangles(np.array([[-2, -2, 2], [0.25, -2, 2], [0.25, 4, 2], [-2, 4, 2.0]])),
+        np.array([[-0.5, 0, 4], [-0.5, 2, 4], [0.5, 2, 4], [0.5, 0, 4.0]]),
+        np.array([[0.0, 1.0, 0.0]]),
+        None,
+    ),
+    # a small box wholly inside the shaft: rays pass round it
+    "inside the shaft": (
+        box(np.array([0, 1, 2.0]), np.array([0.2, 0.2, 0.2])),
+        PLATE,
+        SWEEP,
+        False,
+    ),
+}
+
+
+@pytest.mark.parametrize("case", list(CASES))
+def test_constructed_cases_are_blocked_only_where_embree_blocks_every_segment(case: str) -> None:
+    geometry, quad, origins, some = CASES[case]
+    occluder = Occluder(*join(geometry, quad_triangles(quad)))
+    found = bl.blockers(*geometry, DIAGONAL)
+    assert found is not None
+    fast, reference = classify(found, origins, quad)
+    np.testing.assert_array_equal(fast, reference)
+    rng = np.random.default_rng(1)
+    corners = np.concatenate([quad + LIFT * 0, quad_targets(quad, 256, rng)])
+    partly = []
+    for origin, hidden in zip(origins, fast, strict=True):
+        blocked = trace(occluder, origin, corners)
+        if hidden:
+            assert blocked.all(), (case, origin)
+        partly.append(not blocked.all())
+    if some:  # the test can fail: both kinds occur
+        assert fast.any() and not fast.all()
+    else:
+        assert not fast.any()
+    if some is False:
+        assert all(partly)
+
+
+def random_blockers(rng: np.random.Generator) -> bl.Blockers:
+    parts = [
+        box(rng.uniform(-2, 2, 3), rng.uniform(0.2, 1.0, 3), rng.uniform(0, np.pi), bottom=bool(b))
+        for b in (0, 1)
+    ]
+    corner = rng.uniform(-2, 2, 3)
+    u, v = rng.normal(size=(2, 3))
+    parts.append(quad_triangles(np.array([corner, corner + u, corner + u + v, corner + v])))
+    found = bl.blockers(*join(*parts), DIAGONAL)
+    assert found is not None
+    return found
+
+
+@pytest.mark.skipif(compiled.get() is None, reason="needs the compiled kernels")
+@pytest.mark.parametrize("seed", range(4))
+def test_compiled_test_matches_numpy(seed: int) -> None:
+    rng = np.random.default_rng(seed)
+    found = random_blockers(rng)
+    hits = 0
+    for _ in range(20):
+        quad = PATCH + rng.uniform(-1, 1, 3) + [0, 0, rng.uniform(0, 4)]
+        origins = rng.uniform(-5, 5, (400, 3)) - [0, 0, 4]
+        fast, reference = classify(found, origins, quad)
+        np.testing.assert_array_equal(fast, reference)
+        hits += int(fast.sum())
+    assert hits > 0
+
+
+@pytest.fixture(scope="module", params=[1, 2])
+def room(request: pytest.FixtureRequest):
+    from raytrad.core.pipeline import prepare
+
+    prepared = prepare(furniture_room(request.param), MeshSettings(receivers=1500, patches=120))
+    yield prepared
+    prepared.close()
+
+
+@pytest.mark.skipif(compiled.get() is None, reason="blockers run with compiled kernels only")
+def test_blocked_pairs_have_every_segment_blocked(room) -> None:
+    """Embree, not the blocker code, checks 64 random segments of every blocked pair."""
+    engine = FormFactorEngine(room.mesh, room.occluder)
+    pairs, mesh = engine._pairs, room.mesh
+    assert pairs.blockers is not None and pairs.blockers.count >= 2
+    rng = np.random.default_rng(0)
+    lift = tol.ray_offset * engine.diagonal
+    checked = 0
+    for patch in range(0, mesh.patch_count, 2):
+        receivers = engine._candidates(patch)
+        origins = engine._origins[receivers]
+        hidden = pairs.blockers.blocked(
+            origins,
+            pairs._corners[pairs._corner_ptr[patch] : pairs._corner_ptr[patch + 1]],
+            mesh.patch_center[patch],
+            float(pairs._corner_reach[patch]),
+        )
+        triangles = np.flatnonzero(mesh.triangle_patch == patch)
+        for o in origins[hidden][:30]:
+            tri = rng.choice(triangles, 64)
+            w = rng.dirichlet(np.ones(3), 64)
+            ends = np.einsum("nk,nkj->nj", w, mesh.positions[mesh.triangles[tri]])
+            ends += lift * mesh.triangle_normal[tri]
+            d = ends - o
+            length = np.linalg.norm(d, axis=1)
+            starts = np.repeat((o - room.occluder.origin)[None, :], len(d), axis=0)
+            blocked = room.occluder.occluded_local(starts, d / length[:, None], length - 0.5 * lift)
+            assert blocked.all(), (patch, o)
+            checked += 1
+    assert checked > 300
+    engine.close()
+
+
+@pytest.mark.skipif(compiled.get() is None, reason="blockers run with compiled kernels only")
+def test_pass_with_blockers_equals_pass_without(prepare_scene) -> None:
+    prepared = prepare_scene(shadow_scene(), MeshSettings(receivers=1200))
+    with_blockers = FormFactorEngine(prepared.mesh, prepared.occluder)
+    without = FormFactorEngine(prepared.mesh, prepared.occluder)
+    assert with_blockers._pairs.blockers is not None
+    without._pairs.blockers = None
+    try:
+        for patch in range(prepared.mesh.patch_count):
+            a, b = with_blockers.column(patch), without.column(patch)
+            np.testing.assert_array_equal(a.receivers, b.receivers)
+            np.testing.assert_array_equal(a.factors, b.factors)
+            np.testing.assert_array_equal(a.gather.receivers, b.gather.receivers)
+            np.testing.assert_array_equal(a.gather.weights, b.gather.weights)
+        assert with_blockers.rays_naive == without.rays_naive > 0
+        assert with_blockers.rays_cast < 0.5 * without.rays_cast  # a block on a floor
+    finally:
+        with_blockers.close()
+        without.close()
+
+
+@pytest.mark.parametrize(
+    ("edge", "blocked"), [(0.25 + 1e-3, True), (0.25, False), (0.25 - 1e-3, False)]
+)
+def test_a_sheet_blocks_once_its_edge_passes_the_shaft_by_the_margin(
+    edge: float, blocked: bool
+) -> None:
+    sheet = quad_triangles(np.array([[-2, -2, 2], [edge, -2, 2], [edge, 4, 2], [-2, 4, 2.0]]))
+    quad = np.array([[-0.5, 0, 4], [-0.5, 2, 4], [0.5, 2, 4], [0.5, 0, 4.0]])
+    found = bl.blockers(*sheet, DIAGONAL)
+    assert found is not None
+    fast, reference = classify(found, np.array([[0.0, 1.0, 0.0]]), quad)
+    assert fast[0] == reference[0] == blocked
