@@ -27,6 +27,7 @@ KERNELS = (
     "sample_weights",
     "_segment",
     "visibility_rays",
+    "visible_factors",
     "patch_spread",
     "patch_average",
     "_outside_pyramid",
@@ -298,6 +299,30 @@ def visibility_rays(origins, far, sub_targets, near_c, near_targets, shift, shor
         _segment(origins[near_c[k]], near_targets[k], shift, shorten, o[i], d[i], t, i)
         i += 1
     return o, d, t, far_c, far_s
+
+
+def visible_factors(unoccluded, doubt, weight, far_hidden, near_c, near_w, near_hidden):
+    """Unoccluded factors scaled by the weighted visible fraction of the samples (see
+    :func:`raytrad.core.pairs.numpy_visible_factors`)."""
+    total = np.zeros(len(unoccluded))
+    hidden = np.zeros(len(unoccluded))
+    for c in range(weight.shape[0]):
+        for s in range(weight.shape[1]):
+            total[c] += weight[c, s]
+            if far_hidden[c, s]:
+                hidden[c] += weight[c, s]
+    for k in range(len(near_c)):
+        total[near_c[k]] += near_w[k]
+        if near_hidden[k]:
+            hidden[near_c[k]] += near_w[k]
+    out = np.empty(len(unoccluded))
+    for c in range(len(unoccluded)):
+        if doubt[c]:
+            visible = 1.0 - hidden[c] / total[c] if total[c] > 0.0 else 0.0
+            out[c] = unoccluded[c] * min(max(visible, 0.0), 1.0)
+        else:
+            out[c] = unoccluded[c]
+    return out
 
 
 def _segment(a, b, shift, shorten, o, d, t, i):

@@ -293,12 +293,9 @@ class PairFactors:
         count = len(far_c)
         far_hidden[far_c[blocked[:count]], far_s[blocked[:count]]] = True
         near_hidden[np.flatnonzero(traced)[blocked[count:]]] = True
-        total = weight.sum(axis=1) + np.bincount(near_c, weights=near_w, minlength=len(doubt))
-        hidden = (weight * far_hidden).sum(axis=1) + np.bincount(
-            near_c, weights=near_w * near_hidden, minlength=len(doubt)
+        factors = visible_factors(
+            unoccluded, doubt, weight, far_hidden, near_c, near_w, near_hidden
         )
-        visible = np.where(total > 0, 1.0 - hidden / np.where(total > 0, total, 1.0), 0.0)
-        factors = np.where(doubt, unoccluded * np.clip(visible, 0.0, 1.0), unoccluded)
         return factors, far_hidden, near_hidden, len(blocked)
 
     def _samples(
@@ -442,3 +439,70 @@ class PairFactors:
                     corners[part], x[cc[part]], nx[cc[part]], levels
                 )
         return cc, tri, target, f[keep], shares
+
+
+def visible_factors(
+    unoccluded: np.ndarray,
+    doubt: np.ndarray,
+    weight: np.ndarray,
+    far_hidden: np.ndarray,
+    near_c: np.ndarray,
+    near_w: np.ndarray,
+    near_hidden: np.ndarray,
+) -> np.ndarray:
+    """The visibility-weighted accumulation, compiled when available (see
+    :func:`numpy_visible_factors`, the reference)."""
+    fast = compiled.get()
+    if fast is None:
+        return numpy_visible_factors(
+            unoccluded, doubt, weight, far_hidden, near_c, near_w, near_hidden
+        )
+    return np.asarray(
+        fast.visible_factors(
+            np.ascontiguousarray(unoccluded, dtype=np.float64),
+            np.ascontiguousarray(doubt, dtype=np.bool_),
+            np.ascontiguousarray(weight, dtype=np.float64),
+            np.ascontiguousarray(far_hidden, dtype=np.bool_),
+            np.ascontiguousarray(near_c, dtype=np.int64),
+            np.ascontiguousarray(near_w, dtype=np.float64),
+            np.ascontiguousarray(near_hidden, dtype=np.bool_),
+        )
+    )
+
+
+def numpy_visible_factors(
+    unoccluded: np.ndarray,
+    doubt: np.ndarray,
+    weight: np.ndarray,
+    far_hidden: np.ndarray,
+    near_c: np.ndarray,
+    near_w: np.ndarray,
+    near_hidden: np.ndarray,
+) -> np.ndarray:
+    """Form factors of a chunk's receivers: for those in ``doubt``, the unoccluded factor
+    times the visible share of the samples' weights, else the unoccluded factor.
+
+    Parameters
+    ----------
+    unoccluded : (C,) float64
+        Exact unoccluded factors [1].
+    doubt : (C,) bool
+        The receivers whose samples were traced.
+    weight : (C, S) float64
+        Far samples' disk factors (0 where not a far sample) [1].
+    far_hidden : (C, S) bool
+        Far samples found blocked.
+    near_c : (B,) int64, near_w : (B,) float64, near_hidden : (B,) bool
+        Near triangles' receivers, exact factors [1] and whether found blocked.
+
+    Returns
+    -------
+    (C,) float64 [1]; a receiver in doubt with no sample weight gets 0.
+    """
+    count = len(unoccluded)
+    total = weight.sum(axis=1) + np.bincount(near_c, weights=near_w, minlength=count)
+    hidden = (weight * far_hidden).sum(axis=1) + np.bincount(
+        near_c, weights=near_w * near_hidden, minlength=count
+    )
+    visible = np.where(total > 0, 1.0 - hidden / np.where(total > 0, total, 1.0), 0.0)
+    return np.asarray(np.where(doubt, unoccluded * np.clip(visible, 0.0, 1.0), unoccluded))

@@ -8,6 +8,8 @@ import numpy as np
 import pytest
 
 from raytrad.constants import tol
+from raytrad.core import compiled
+from raytrad.core import pairs as pairs_module
 from raytrad.core.kernels import numpy_facing_triangle_sums
 from raytrad.core.mesh import MeshSettings, RadiosityMesh, build_mesh
 from raytrad.core.pairs import PairFactors
@@ -70,3 +72,29 @@ def test_strongly_folded_quad_matches_the_triangle_sum(lift: float) -> None:
     assert len(folded) >= 2
     assert np.bincount(mesh.triangle_patch)[folded].min() > 20  # refined: many triangles
     assert _check_patches(mesh, np.arange(mesh.patch_count), seed=2) > 0.2
+
+
+@pytest.mark.skipif(compiled.get() is None, reason="needs the compiled kernels")
+@pytest.mark.parametrize("seed", range(3))
+def test_compiled_visible_factors_match_numpy(seed: int) -> None:
+    """The visibility-weighted accumulation: random weights and blocked samples, with
+    receivers that have no sample weight, every sample blocked, or none traced."""
+    rng = np.random.default_rng(seed)
+    count, samples, near = 300, 18, 500
+    unoccluded = rng.uniform(0, 0.2, count)
+    doubt = rng.random(count) < 0.7
+    weight = rng.uniform(0, 0.01, (count, samples)) * (rng.random((count, samples)) < 0.6)
+    weight[:10] = 0.0  # no far samples
+    far_hidden = (rng.random((count, samples)) < 0.4) & (weight > 0)
+    far_hidden[10:20] = weight[10:20] > 0  # every far sample blocked
+    near_c = np.sort(rng.integers(20, count, near))
+    near_w = rng.uniform(0, 0.005, near)
+    near_hidden = rng.random(near) < 0.4
+    args = (unoccluded, doubt, weight, far_hidden, near_c, near_w, near_hidden)
+    fast = pairs_module.visible_factors(*args)
+    reference = pairs_module.numpy_visible_factors(*args)
+    np.testing.assert_allclose(fast, reference, rtol=1e-12, atol=1e-15)
+    assert (fast[:10][doubt[:10]] == 0).all()
+    assert (fast[10:20][doubt[10:20]] == 0).all()
+    np.testing.assert_array_equal(fast[~doubt], unoccluded[~doubt])
+    assert ((fast > 0) & (fast < unoccluded)).sum() > 100
