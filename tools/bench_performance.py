@@ -175,7 +175,7 @@ def pass_table(receivers: int) -> None:
         ),
         ("raytrad pass, shaft culling, no convex blockers", shafts_seconds, shafts_rays),
         ("raytrad pass, shaft culling and convex blockers (default)", seconds, rays),
-        ("raytrad pass, numpy kernels (shaft culling only)", numpy_seconds, numpy_rays),
+        ("raytrad pass, numpy kernels (no culling, no blockers)", numpy_seconds, numpy_rays),
     ]
     for name, took, count in rows:
         print(
