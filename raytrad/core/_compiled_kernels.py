@@ -22,6 +22,7 @@ KERNELS = (
     "contour_form_factor",
     "clipped_outline",
     "clipped_contour_form_factor",
+    "planar_unoccluded",
     "piecewise_contour_form_factor",
     "linear_corner_shares",
     "sample_weights",
@@ -30,8 +31,6 @@ KERNELS = (
     "visible_factors",
     "patch_spread",
     "patch_average",
-    "_outside_pyramid",
-    "shaft_clear",
     "shoot",
     "_row_scales",
     "sinkhorn_columns",
@@ -157,6 +156,41 @@ def clipped_contour_form_factor(start, end, points, normals):
     out = np.empty(len(points))
     for i in range(len(points)):
         out[i] = clipped_outline(start, end, 0, len(start), points[i], normals[i])
+    return out
+
+
+def planar_unoccluded(start, end, points, normals, patch_normal, patch_center, band):
+    """Exact unoccluded factors of a planar patch (outline ``start -> end``): 0 behind it
+    or below the receiver's horizon, the whole outline's sum where it lies above, the
+    clipped outline's where it straddles (see :meth:`raytrad.core.pairs.PairFactors._unoccluded`,
+    whose numpy path is the reference)."""
+    out = np.zeros(len(points))
+    for i in range(len(points)):
+        x, n = points[i], normals[i]
+        front = (
+            (x[0] - patch_center[0]) * patch_normal[0]
+            + (x[1] - patch_center[1]) * patch_normal[1]
+            + (x[2] - patch_center[2]) * patch_normal[2]
+        )
+        if not front > band:
+            continue
+        level = x[0] * n[0] + x[1] * n[1] + x[2] * n[2]
+        top, low = -np.inf, np.inf
+        for e in range(len(start)):
+            h = start[e, 0] * n[0] + start[e, 1] * n[1] + start[e, 2] * n[2] - level
+            top, low = max(top, h), min(low, h)
+        if not top > band:
+            continue
+        if low >= -band:
+            total = 0.0
+            for e in range(len(start)):
+                a, b = start[e], end[e]
+                total += edge_term(
+                    a[0] - x[0], a[1] - x[1], a[2] - x[2], b[0] - x[0], b[1] - x[1], b[2] - x[2], n
+                )
+            out[i] = abs(total) / (2.0 * math.pi)
+        else:
+            out[i] = clipped_outline(start, end, 0, len(start), x, n)
     return out
 
 
@@ -339,103 +373,6 @@ def _segment(a, b, shift, shorten, o, d, t, i):
     d[1] = dy / scale
     d[2] = dz / scale
     t[i] = max(length - shorten, 0.0)
-
-
-def shaft_clear(
-    origins,
-    sides,
-    patch_sides,
-    normals,
-    offsets,
-    centers,
-    radii,
-    hull,
-    hull_ptr,
-    band,
-    patch_center,
-    patch_reach,
-):
-    """Receivers whose shaft to a patch no facet can block (see
-    :func:`raytrad.core.kernels.numpy_shaft_clear`): per receiver, the candidate facets are
-    a few word operations on packed side bits; only those get the capsule and pyramid
-    tests."""
-    count = len(radii)
-    words = sides.shape[1] // 2
-    tail = count - 64 * (words - 1)
-    last = np.uint64(0xFFFFFFFFFFFFFFFF)
-    if tail < 64:
-        last = (np.uint64(1) << np.uint64(tail)) - np.uint64(1)
-    out = np.ones(origins.shape[0], dtype=np.bool_)
-    for c in range(origins.shape[0]):
-        ox, oy, oz = origins[c, 0], origins[c, 1], origins[c, 2]
-        dx = patch_center[0] - ox
-        dy = patch_center[1] - oy
-        dz = patch_center[2] - oz
-        length2 = dx * dx + dy * dy + dz * dz
-        for w in range(words):
-            same = (sides[c, w] & patch_sides[w]) | (sides[c, words + w] & patch_sides[words + w])
-            cand = ~same
-            if w == words - 1:
-                cand &= last
-            while cand != np.uint64(0):
-                low = cand & (~cand + np.uint64(1))
-                cand ^= low
-                q = 64 * w + int(math.log2(float(low)))
-                px = centers[q, 0] - ox
-                py = centers[q, 1] - oy
-                pz = centers[q, 2] - oz
-                t = 0.0
-                if length2 > 0.0:
-                    t = min(max((px * dx + py * dy + pz * dz) / length2, 0.0), 1.0)
-                ex = px - t * dx
-                ey = py - t * dy
-                ez = pz - t * dz
-                reach = radii[q] + patch_reach
-                if ex * ex + ey * ey + ez * ez > reach * reach:
-                    continue
-                height = normals[q, 0] * ox + normals[q, 1] * oy + normals[q, 2] * oz - offsets[q]
-                if not _outside_pyramid(
-                    ox,
-                    oy,
-                    oz,
-                    height,
-                    band,
-                    hull,
-                    hull_ptr[q],
-                    hull_ptr[q + 1],
-                    dx,
-                    dy,
-                    dz,
-                    patch_reach,
-                ):
-                    out[c] = False
-                    break
-            if not out[c]:
-                break
-    return out
-
-
-def _outside_pyramid(ox, oy, oz, height, band, hull, a, b, dx, dy, dz, reach):
-    """Whether the ball (o + d, reach) lies wholly outside one side plane of the pyramid
-    from ``o`` through the hull ``hull[a:b]`` (counter-clockwise about the facet normal)."""
-    if abs(height) <= band or b - a < 3:
-        return False
-    sign = -1.0 if height > 0.0 else 1.0
-    for k in range(a, b):
-        j = k + 1 if k + 1 < b else a
-        ax = hull[k, 0] - ox
-        ay = hull[k, 1] - oy
-        az = hull[k, 2] - oz
-        bx = hull[j, 0] - ox
-        by = hull[j, 1] - oy
-        bz = hull[j, 2] - oz
-        nx = sign * (ay * bz - az * by)
-        ny = sign * (az * bx - ax * bz)
-        nz = sign * (ax * by - ay * bx)
-        norm = math.sqrt(nx * nx + ny * ny + nz * nz)
-        if nx * dx + ny * dy + nz * dz < -reach * norm:
-            return True
-    return False
 
 
 def shoot(

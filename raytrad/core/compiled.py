@@ -58,10 +58,10 @@ def _build() -> SimpleNamespace | None:
     except ImportError:  # pragma: no cover - numba is a dependency
         log.warning("numba is not installed: form factors use the slower numpy kernels")
         return None
-    from raytrad.core import _compiled_blockers, _compiled_gather, _compiled_kernels
+    from raytrad.core import _compiled_gather, _compiled_kernels, _compiled_shafts
 
     kernels = {}
-    for loops in (_compiled_kernels, _compiled_gather, _compiled_blockers):
+    for loops in (_compiled_kernels, _compiled_gather, _compiled_shafts):
         for name in loops.KERNELS:
             if not hasattr(getattr(loops, name), "py_func"):  # not compiled yet
                 setattr(loops, name, _jit(numba, getattr(loops, name)))

@@ -343,6 +343,19 @@ class PairFactors:
         m = self.mesh
         a, b = self._edge_ptr[patch], self._edge_ptr[patch + 1]
         planar = bool(m.patch_planar[patch])
+        fast = compiled.get()
+        if planar and fast is not None:  # the same in one compiled loop
+            return np.asarray(
+                fast.planar_unoccluded(
+                    self._edge_start[a:b],
+                    self._edge_end[a:b],
+                    np.ascontiguousarray(x, dtype=np.float64),
+                    np.ascontiguousarray(nx, dtype=np.float64),
+                    m.patch_normal[patch],
+                    m.patch_center[patch],
+                    tol.horizon * self.diagonal,
+                )
+            )
         if planar:  # a plane's heights are extreme at its outline's corners
             verts = self._edge_start[a:b]
         else:  # and a folded patch's at its pieces' outlines' corners

@@ -98,3 +98,26 @@ def test_compiled_visible_factors_match_numpy(seed: int) -> None:
     assert (fast[10:20][doubt[10:20]] == 0).all()
     np.testing.assert_array_equal(fast[~doubt], unoccluded[~doubt])
     assert ((fast > 0) & (fast < unoccluded)).sum() > 100
+
+
+@pytest.mark.skipif(compiled.get() is None, reason="needs the compiled kernels")
+def test_compiled_planar_unoccluded_matches_numpy(
+    cornell: Prepared, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The planar patches' one-loop compiled factor against the numpy path, from random
+    probes and from probes on patches' own planes and edges (coplanar, grazing)."""
+    mesh = cornell.mesh
+    pairs = PairFactors(mesh, None, float(np.linalg.norm(np.ptp(mesh.positions, axis=0))))
+    x, n = _probes(mesh, np.random.default_rng(3))
+    # on the receivers themselves, with their normals: coplanar with their own patches
+    pick = np.random.default_rng(4).choice(mesh.receiver_count, 300, replace=False)
+    x = np.concatenate([x, mesh.receiver_position[pick]])
+    n = np.concatenate([n, mesh.receiver_normal[pick]])
+    patches = np.flatnonzero(mesh.patch_planar)[::7]
+    fast = [pairs._unoccluded(x, n, int(p)) for p in patches]
+    monkeypatch.setenv("RAYTRAD_KERNELS", "numpy")
+    assert compiled.get() is None
+    for p, got in zip(patches, fast, strict=True):
+        want = pairs._unoccluded(x, n, int(p))
+        np.testing.assert_allclose(got, want, rtol=0, atol=AGREE)
+    assert sum(float((f > 0).mean()) for f in fast) / len(fast) > 0.2

@@ -1,7 +1,9 @@
-"""The convex-blocker test behind :mod:`raytrad.core.compiled`, written for numba (imported
-only there). Plain Python as written here; :func:`raytrad.core.compiled.get` compiles
-every function in :data:`KERNELS`. It computes what its numpy reference,
-:func:`raytrad.core.blockers.numpy_blocked`, computes; see there for shapes and units.
+"""The pair classification loops behind :mod:`raytrad.core.compiled`, written for numba
+(imported only there): the shaft test (pairs nothing can block) and the convex-blocker
+test (pairs one occluder hides wholly). Plain Python as written here;
+:func:`raytrad.core.compiled.get` compiles every function in :data:`KERNELS`. Each
+computes what its numpy reference computes (:func:`raytrad.core.kernels.numpy_shaft_clear`,
+:func:`raytrad.core.blockers.numpy_blocked`); see there for shapes and units.
 """
 
 # mypy: ignore-errors
@@ -11,7 +13,14 @@ import math
 import numpy as np
 
 #: Every function to compile, each after the helpers it calls.
-KERNELS = ("_heights", "_sheet_hides", "_solid_hides", "blocked_pairs")
+KERNELS = (
+    "_outside_pyramid",
+    "shaft_clear",
+    "_heights",
+    "_sheet_hides",
+    "_solid_hides",
+    "blocked_pairs",
+)
 
 FACE, HOLE, SHEET, EDGE = 0, 1, 2, 3
 
@@ -124,3 +133,100 @@ def blocked_pairs(
                 out[i] = True
                 break
     return out
+
+
+def shaft_clear(
+    origins,
+    sides,
+    patch_sides,
+    normals,
+    offsets,
+    centers,
+    radii,
+    hull,
+    hull_ptr,
+    band,
+    patch_center,
+    patch_reach,
+):
+    """Receivers whose shaft to a patch no facet can block (see
+    :func:`raytrad.core.kernels.numpy_shaft_clear`): per receiver, the candidate facets are
+    a few word operations on packed side bits; only those get the capsule and pyramid
+    tests."""
+    count = len(radii)
+    words = sides.shape[1] // 2
+    tail = count - 64 * (words - 1)
+    last = np.uint64(0xFFFFFFFFFFFFFFFF)
+    if tail < 64:
+        last = (np.uint64(1) << np.uint64(tail)) - np.uint64(1)
+    out = np.ones(origins.shape[0], dtype=np.bool_)
+    for c in range(origins.shape[0]):
+        ox, oy, oz = origins[c, 0], origins[c, 1], origins[c, 2]
+        dx = patch_center[0] - ox
+        dy = patch_center[1] - oy
+        dz = patch_center[2] - oz
+        length2 = dx * dx + dy * dy + dz * dz
+        for w in range(words):
+            same = (sides[c, w] & patch_sides[w]) | (sides[c, words + w] & patch_sides[words + w])
+            cand = ~same
+            if w == words - 1:
+                cand &= last
+            while cand != np.uint64(0):
+                low = cand & (~cand + np.uint64(1))
+                cand ^= low
+                q = 64 * w + int(math.log2(float(low)))
+                px = centers[q, 0] - ox
+                py = centers[q, 1] - oy
+                pz = centers[q, 2] - oz
+                t = 0.0
+                if length2 > 0.0:
+                    t = min(max((px * dx + py * dy + pz * dz) / length2, 0.0), 1.0)
+                ex = px - t * dx
+                ey = py - t * dy
+                ez = pz - t * dz
+                reach = radii[q] + patch_reach
+                if ex * ex + ey * ey + ez * ez > reach * reach:
+                    continue
+                height = normals[q, 0] * ox + normals[q, 1] * oy + normals[q, 2] * oz - offsets[q]
+                if not _outside_pyramid(
+                    ox,
+                    oy,
+                    oz,
+                    height,
+                    band,
+                    hull,
+                    hull_ptr[q],
+                    hull_ptr[q + 1],
+                    dx,
+                    dy,
+                    dz,
+                    patch_reach,
+                ):
+                    out[c] = False
+                    break
+            if not out[c]:
+                break
+    return out
+
+
+def _outside_pyramid(ox, oy, oz, height, band, hull, a, b, dx, dy, dz, reach):
+    """Whether the ball (o + d, reach) lies wholly outside one side plane of the pyramid
+    from ``o`` through the hull ``hull[a:b]`` (counter-clockwise about the facet normal)."""
+    if abs(height) <= band or b - a < 3:
+        return False
+    sign = -1.0 if height > 0.0 else 1.0
+    for k in range(a, b):
+        j = k + 1 if k + 1 < b else a
+        ax = hull[k, 0] - ox
+        ay = hull[k, 1] - oy
+        az = hull[k, 2] - oz
+        bx = hull[j, 0] - ox
+        by = hull[j, 1] - oy
+        bz = hull[j, 2] - oz
+        nx = sign * (ay * bz - az * by)
+        ny = sign * (az * bx - ax * bz)
+        nz = sign * (ax * by - ay * bx)
+        norm = math.sqrt(nx * nx + ny * ny + nz * nz)
+        if nx * dx + ny * dy + nz * dz < -reach * norm:
+            return True
+    return False
