@@ -24,16 +24,14 @@ KERNELS = (
     "clipped_contour_form_factor",
     "planar_unoccluded",
     "piecewise_contour_form_factor",
+    "_linear_shares",
     "linear_corner_shares",
+    "_visible_centroid",
+    "near_triangles",
     "sample_weights",
     "_segment",
     "visibility_rays",
     "visible_factors",
-    "patch_spread",
-    "patch_average",
-    "shoot",
-    "_row_scales",
-    "sinkhorn_columns",
 )
 
 
@@ -212,32 +210,153 @@ def piecewise_contour_form_factor(
     return out
 
 
+def _linear_shares(tri, x, n, bary, centroids, part, work, out):
+    """One triangle's corner shares into ``out`` (3,) (see :func:`linear_corner_shares`;
+    ``part`` (3, 3) and ``work`` (4, 3) are scratch)."""
+    total = 0.0
+    s0 = s1 = s2 = 0.0
+    for s in range(len(bary)):
+        for k in range(3):
+            for d in range(3):
+                part[k, d] = (
+                    bary[s, k, 0] * tri[0, d]
+                    + bary[s, k, 1] * tri[1, d]
+                    + bary[s, k, 2] * tri[2, d]
+                )
+        f = clipped_factor(part, x, n, work)
+        total += f
+        s0 += f * centroids[s, 0]
+        s1 += f * centroids[s, 1]
+        s2 += f * centroids[s, 2]
+    if total > 0.0:
+        out[0], out[1], out[2] = s0 / total, s1 / total, s2 / total
+    else:
+        out[0] = out[1] = out[2] = 1.0 / 3.0
+
+
 def linear_corner_shares(triangles, points, normals, bary, centroids):
     out = np.empty((len(triangles), 3))
     part = np.empty((3, 3))
     work = np.empty((4, 3))
     for i in range(len(triangles)):
-        tri = triangles[i]
-        total = 0.0
-        s0 = s1 = s2 = 0.0
-        for s in range(len(bary)):
-            for k in range(3):
-                for d in range(3):
-                    part[k, d] = (
-                        bary[s, k, 0] * tri[0, d]
-                        + bary[s, k, 1] * tri[1, d]
-                        + bary[s, k, 2] * tri[2, d]
-                    )
-            f = clipped_factor(part, points[i], normals[i], work)
-            total += f
-            s0 += f * centroids[s, 0]
-            s1 += f * centroids[s, 1]
-            s2 += f * centroids[s, 2]
-        if total > 0.0:
-            out[i, 0], out[i, 1], out[i, 2] = s0 / total, s1 / total, s2 / total
-        else:
-            out[i, 0] = out[i, 1] = out[i, 2] = 1.0 / 3.0
+        _linear_shares(triangles[i], points[i], normals[i], bary, centroids, part, work, out[i])
     return out
+
+
+def _visible_centroid(tri, x, n, horizon, out):
+    """The mean corner of the part of a triangle above the receiver's horizon into ``out``
+    (3,) (:func:`raytrad.core.kernels.visible_centroid` for one pair)."""
+    h = np.empty(3)
+    reach = 0.0
+    above = True
+    for k in range(3):
+        dx, dy, dz = tri[k, 0] - x[0], tri[k, 1] - x[1], tri[k, 2] - x[2]
+        h[k] = dx * n[0] + dy * n[1] + dz * n[2]
+        reach = max(reach, dx * dx + dy * dy + dz * dz)
+    snap = horizon * math.sqrt(reach)
+    for k in range(3):
+        if not (abs(h[k]) <= snap or h[k] >= 0.0):
+            above = False
+    if above:
+        for d in range(3):
+            out[d] = (tri[0, d] + tri[1, d] + tri[2, d]) / 3.0
+        return
+    count = 0
+    out[0] = out[1] = out[2] = 0.0
+    for k in range(3):
+        j = (k + 1) % 3
+        if h[k] >= 0.0 and count < 4:
+            for d in range(3):
+                out[d] += tri[k, d]
+            count += 1
+        if (h[k] >= 0.0) != (h[j] >= 0.0) and count < 4:
+            t = h[k] / (h[k] - h[j])
+            for d in range(3):
+                out[d] += tri[k, d] + t * (tri[j, d] - tri[k, d])
+            count += 1
+    for d in range(3):
+        out[d] /= max(count, 1)
+
+
+def near_triangles(
+    near,
+    sub_start,
+    sub_ptr,
+    sub_tri,
+    tri_corners,
+    tri_normal,
+    points,
+    normals,
+    band,
+    horizon,
+    lift,
+    share_sizes,
+    bary3,
+    centroids3,
+    bary2,
+    centroids2,
+):
+    """The near field of a chunk in one pass (see
+    :meth:`raytrad.core.pairs.PairFactors._near_field`, whose numpy path is the reference):
+    per near (receiver, sub-area) pair in row-major order, each triangle of the sub-area
+    facing the receiver by more than ``band`` with an exact factor above 0: the receiver,
+    the triangle, the ray target, the factor and the corner shares by
+    :func:`linear_corner_shares` within ``share_sizes`` triangle sizes. Beyond that the
+    shares are left at 1/3 and ``far`` marks them for the caller."""
+    size = 0
+    for c in range(near.shape[0]):
+        for s in range(near.shape[1]):
+            if near[c, s]:
+                size += sub_ptr[s + sub_start + 1] - sub_ptr[s + sub_start]
+    out_c = np.empty(size, dtype=np.int64)
+    out_tri = np.empty(size, dtype=np.int64)
+    target = np.empty((size, 3))
+    factor = np.empty(size)
+    shares = np.empty((size, 3))
+    far = np.zeros(size, dtype=np.bool_)
+    part = np.empty((3, 3))
+    work = np.empty((4, 3))
+    k = 0
+    for c in range(near.shape[0]):
+        x, n = points[c], normals[c]
+        for s in range(near.shape[1]):
+            if not near[c, s]:
+                continue
+            for q in range(sub_ptr[s + sub_start], sub_ptr[s + sub_start + 1]):
+                t = sub_tri[q]
+                tri, m = tri_corners[t], tri_normal[t]
+                front = (
+                    (x[0] - tri[0, 0]) * m[0]
+                    + (x[1] - tri[0, 1]) * m[1]
+                    + (x[2] - tri[0, 2]) * m[2]
+                )
+                if not front > band:
+                    continue
+                f = clipped_factor(tri, x, n, work)
+                if not f > 0.0:
+                    continue
+                out_c[k], out_tri[k], factor[k] = c, t, f
+                _visible_centroid(tri, x, n, horizon, target[k])
+                for d in range(3):
+                    target[k, d] += lift * m[d]
+                longest = 0.0
+                for e in range(3):
+                    p = (e + 2) % 3
+                    ex, ey, ez = tri[e, 0] - tri[p, 0], tri[e, 1] - tri[p, 1], tri[e, 2] - tri[p, 2]
+                    longest = max(longest, math.sqrt(ex * ex + ey * ey + ez * ez))
+                mx = (tri[0, 0] + tri[1, 0] + tri[2, 0]) / 3.0 - x[0]
+                my = (tri[0, 1] + tri[1, 1] + tri[2, 1]) / 3.0 - x[1]
+                mz = (tri[0, 2] + tri[1, 2] + tri[2, 2]) / 3.0 - x[2]
+                distance = math.sqrt(mx * mx + my * my + mz * mz) / longest
+                if distance >= share_sizes:
+                    far[k] = True
+                    shares[k, 0] = shares[k, 1] = shares[k, 2] = 1.0 / 3.0
+                elif distance < 1.0:
+                    _linear_shares(tri, x, n, bary3, centroids3, part, work, shares[k])
+                else:
+                    _linear_shares(tri, x, n, bary2, centroids2, part, work, shares[k])
+                k += 1
+    return out_c[:k], out_tri[:k], target[:k], factor[:k], shares[:k], far[:k]
 
 
 def sample_weights(points, normals, samples, sample_normals, near_reach, area):
@@ -266,45 +385,6 @@ def sample_weights(points, normals, samples, sample_normals, near_reach, area):
                 far[c, s] = True
                 weight[c, s] = cos_r * cos_s * area[s] / (math.pi * r2 + area[s])
     return weight, far, near
-
-
-def patch_spread(
-    entry_receiver,
-    entry_patch,
-    entry_weight,
-    emission,
-    reflectance,
-    irradiance,
-    entry_shot,
-    unshot,
-    patch_count,
-):
-    """Per patch ``sum_k W_pk |dB_pk - dB_p|`` and ``max_k |dB_pk|`` (see
-    :meth:`raytrad.core.system.DiscreteSystem.numpy_spread`)."""
-    spread = np.zeros((patch_count, 3))
-    peak = np.zeros((patch_count, 3))
-    for e in range(len(entry_receiver)):
-        k = entry_receiver[e]
-        p = entry_patch[e]
-        for c in range(3):
-            own = emission[k, c] + reflectance[k, c] * irradiance[k, c] - entry_shot[e, c]
-            spread[p, c] += entry_weight[e] * abs(own - unshot[p, c])
-            peak[p, c] = max(peak[p, c], abs(own))
-    return spread, peak
-
-
-def patch_average(receivers, values, receiver_ptr, entry_patch, entry_weight, patch_count):
-    """``W[:, receivers] @ values`` (see :meth:`raytrad.core.system.DiscreteSystem.average`)."""
-    out = np.zeros((patch_count, 3))
-    for i in range(len(receivers)):
-        k = receivers[i]
-        for e in range(receiver_ptr[k], receiver_ptr[k + 1]):
-            p = entry_patch[e]
-            w = entry_weight[e]
-            out[p, 0] += w * values[i, 0]
-            out[p, 1] += w * values[i, 1]
-            out[p, 2] += w * values[i, 2]
-    return out
 
 
 def visibility_rays(origins, far, sub_targets, near_c, near_targets, shift, shorten):
@@ -373,193 +453,3 @@ def _segment(a, b, shift, shorten, o, d, t, i):
     d[1] = dy / scale
     d[2] = dz / scale
     t[i] = max(length - shorten, 0.0)
-
-
-def shoot(
-    entries,
-    entry_receiver,
-    entry_weight,
-    emission,
-    reflectance,
-    irradiance,
-    entry_shot,
-    amount,
-    receivers,
-    factors,
-    near_receivers,
-    near_pointer,
-    near_sources,
-    near_weights,
-    area,
-    receiver_ptr,
-    entry_patch,
-    patch_radiosity,
-    scratch,
-    sub_lo,
-    sub_hi,
-    mean_ptr,
-    mean_receivers,
-    mean_shares,
-    base,
-):
-    """One shot through a cached column, in place (see
-    :func:`raytrad.core.solver.numpy_shoot`, the reference, for the steps). Returns the
-    power caught by the receivers, the power they reflect ((3,) each, [W]) and
-    ``sum_j a_j F_jp`` [m2]. The patch's sub-areas ``sub_lo:sub_hi`` get the means of
-    its receivers' shots at ``scratch[base + s]`` (their CSR ``mean_*``)."""
-    n = len(entries)
-    own = np.empty((n, 3))
-    mean = np.zeros(3)
-    for i in range(n):
-        e = entries[i]
-        k = entry_receiver[e]
-        for c in range(3):
-            own[i, c] = emission[k, c] + reflectance[k, c] * irradiance[k, c] - entry_shot[e, c]
-            mean[c] += entry_weight[e] * own[i, c]
-    for i in range(n):
-        e = entries[i]
-        k = entry_receiver[e]
-        for c in range(3):
-            value = own[i, c] + (amount[c] - mean[c])
-            entry_shot[e, c] += value
-            scratch[k, c] = value
-    count = len(receivers)
-    received = np.empty((count, 3))
-    for r in range(count):
-        for c in range(3):
-            received[r, c] = factors[r] * amount[c]
-    near_count = len(near_receivers)
-    if near_count:
-        for s in range(sub_lo, sub_hi):
-            for q in range(mean_ptr[s], mean_ptr[s + 1]):
-                for c in range(3):
-                    scratch[base + s, c] += mean_shares[q] * scratch[mean_receivers[q], c]
-        near = np.empty(near_count, dtype=np.int64)
-        r = 0
-        for g in range(near_count):  # both ascending
-            while receivers[r] != near_receivers[g]:
-                r += 1
-            near[g] = r
-        excess = np.zeros(3)
-        for g in range(near_count):
-            r = near[g]
-            seen = np.zeros(3)
-            for s in range(near_pointer[g], near_pointer[g + 1]):
-                for c in range(3):
-                    seen[c] += near_weights[s] * scratch[near_sources[s], c]
-            a = area[receivers[r]]
-            for c in range(3):
-                received[r, c] = factors[r] * seen[c]
-                excess[c] += a * (received[r, c] - factors[r] * amount[c])
-        is_near = np.zeros(count, dtype=np.bool_)
-        for g in range(near_count):
-            is_near[near[g]] = True
-        caught = 0.0
-        for r in range(count):
-            if not is_near[r]:
-                caught += area[receivers[r]] * factors[r]
-        target_near = not caught > 0.0
-        if target_near:
-            caught = 0.0
-            for g in range(near_count):
-                caught += area[receivers[near[g]]] * factors[near[g]]
-        if caught > 0.0:
-            for r in range(count):
-                if is_near[r] == target_near:
-                    for c in range(3):
-                        received[r, c] -= factors[r] * (excess[c] / caught)
-        for i in range(n):
-            k = entry_receiver[entries[i]]
-            for c in range(3):
-                scratch[k, c] = 0.0
-        for s in range(sub_lo, sub_hi):
-            for c in range(3):
-                scratch[base + s, c] = 0.0
-    else:
-        for i in range(n):
-            k = entry_receiver[entries[i]]
-            for c in range(3):
-                scratch[k, c] = 0.0
-    power = np.zeros(3)
-    reflected = np.zeros(3)
-    capture = 0.0
-    for r in range(count):
-        k = receivers[r]
-        a = area[k]
-        capture += a * factors[r]
-        for c in range(3):
-            value = received[r, c]
-            irradiance[k, c] += value
-            bounce = reflectance[k, c] * value
-            power[c] += a * value
-            reflected[c] += a * bounce
-            for e in range(receiver_ptr[k], receiver_ptr[k + 1]):
-                patch_radiosity[entry_patch[e], c] += entry_weight[e] * bounce
-    return power, reflected, capture
-
-
-def _row_scales(pointer, rows, values, col_scale, fixed_rows, out):
-    """Row scales holding the fixed rows of ``F diag(col_scale)`` to a sum of 1, in place
-    (see :func:`raytrad.core.balance._row_scales`)."""
-    out[:] = 0.0
-    for p in range(len(pointer) - 1):
-        for k in range(pointer[p], pointer[p + 1]):
-            out[rows[k]] += values[k] * col_scale[p]
-    for j in range(len(out)):
-        if fixed_rows[j] and out[j] > 0.0:
-            out[j] = 1.0 / max(out[j], 1e-300)
-        else:
-            out[j] = 1.0
-
-
-def sinkhorn_columns(
-    pointer,
-    rows,
-    values,
-    receiver_area,
-    patch_area,
-    fixed_rows,
-    closed_columns,
-    iterations,
-    converged,
-):
-    """:func:`raytrad.core.balance.sinkhorn` over columns stored end to end (CSR by patch),
-    with no per-entry temporaries; also the captures before and after and the balanced row
-    sums (see :func:`raytrad.core.balance.balance_columns`)."""
-    total = len(patch_area)
-    col_scale = np.ones(total)
-    row_scale = np.ones(len(receiver_area))
-    capture0 = np.zeros(total)
-    for p in range(total):
-        for k in range(pointer[p], pointer[p + 1]):
-            capture0[p] += receiver_area[rows[k]] * values[k]
-        capture0[p] /= patch_area[p]
-    done = 0
-    while done < iterations:
-        done += 1
-        _row_scales(pointer, rows, values, col_scale, fixed_rows, row_scale)
-        change = 0.0
-        for p in range(total):
-            capture = 0.0
-            for k in range(pointer[p], pointer[p + 1]):
-                j = rows[k]
-                capture += receiver_area[j] * values[k] * row_scale[j]
-            capture /= patch_area[p]
-            new = 1.0
-            if capture > 1.0 or closed_columns[p]:
-                new = 1.0 / capture
-            change = max(change, abs(new / col_scale[p] - 1.0))
-            col_scale[p] = new
-        if change < converged:
-            break
-    _row_scales(pointer, rows, values, col_scale, fixed_rows, row_scale)
-    final_rows = np.zeros(len(receiver_area))
-    capture = np.zeros(total)
-    for p in range(total):
-        for k in range(pointer[p], pointer[p + 1]):
-            j = rows[k]
-            final = values[k] * col_scale[p] * row_scale[j]
-            final_rows[j] += final
-            capture[p] += receiver_area[j] * final
-        capture[p] /= patch_area[p]
-    return row_scale, col_scale, done, capture0, capture, final_rows

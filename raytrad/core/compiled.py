@@ -58,10 +58,15 @@ def _build() -> SimpleNamespace | None:
     except ImportError:  # pragma: no cover - numba is a dependency
         log.warning("numba is not installed: form factors use the slower numpy kernels")
         return None
-    from raytrad.core import _compiled_gather, _compiled_kernels, _compiled_shafts
+    from raytrad.core import (
+        _compiled_gather,
+        _compiled_kernels,
+        _compiled_shafts,
+        _compiled_solver,
+    )
 
     kernels = {}
-    for loops in (_compiled_kernels, _compiled_gather, _compiled_shafts):
+    for loops in (_compiled_kernels, _compiled_gather, _compiled_shafts, _compiled_solver):
         for name in loops.KERNELS:
             if not hasattr(getattr(loops, name), "py_func"):  # not compiled yet
                 setattr(loops, name, _jit(numba, getattr(loops, name)))

@@ -121,3 +121,38 @@ def test_compiled_planar_unoccluded_matches_numpy(
         want = pairs._unoccluded(x, n, int(p))
         np.testing.assert_allclose(got, want, rtol=0, atol=AGREE)
     assert sum(float((f > 0).mean()) for f in fast) / len(fast) > 0.2
+
+
+@pytest.mark.skipif(compiled.get() is None, reason="needs the compiled kernels")
+def test_compiled_near_field_matches_numpy(cornell: Prepared) -> None:
+    """The one-loop near field (facing test, exact factor, visible centroid, corner
+    shares at 3 and 2 subdivision levels, far shares) against the numpy path, from
+    receivers on and around the patches (on their edges: triangles straddling the
+    horizon) and random probes."""
+    mesh = cornell.mesh
+    pairs = PairFactors(mesh, None, float(np.linalg.norm(np.ptp(mesh.positions, axis=0))))
+    rng = np.random.default_rng(5)
+    probes, probe_normals = _probes(mesh, rng, 200)
+    seen = {"far": 0, "split": 0, "items": 0}
+    for patch in np.flatnonzero(mesh.patch_planar)[::9]:
+        sub = mesh.patch_subareas(int(patch))
+        close = np.argsort(
+            np.linalg.norm(mesh.receiver_position - mesh.patch_center[patch], axis=1)
+        )
+        pick = close[:150]
+        x = np.concatenate([mesh.receiver_position[pick], probes])
+        n = np.concatenate([mesh.receiver_normal[pick], probe_normals])
+        near = rng.random((len(x), sub.stop - sub.start)) < 0.5
+        got = pairs._near_field(x, n, near, sub)
+        want = pairs._numpy_near_field(x, n, near, sub)
+        np.testing.assert_array_equal(got[0], want[0])
+        np.testing.assert_array_equal(got[1], want[1])
+        for a, b in zip(got[2:], want[2:], strict=True):
+            np.testing.assert_allclose(a, b, rtol=1e-12, atol=1e-12)
+        corners = pairs._tri_corners[want[1]]
+        size = np.linalg.norm(corners - np.roll(corners, 1, axis=1), axis=2).max(axis=1)
+        distance = np.linalg.norm(corners.mean(axis=1) - x[want[0]], axis=1) / size
+        seen["far"] += int((distance >= 3.0).sum())
+        seen["split"] += int((distance < 1.0).sum())
+        seen["items"] += len(want[0])
+    assert min(seen.values()) > 50, seen
