@@ -19,6 +19,7 @@ KERNELS = (
     "lambert",
     "clipped_factor",
     "polygon_form_factor",
+    "outline_factor",
     "contour_form_factor",
     "clipped_outline",
     "clipped_contour_form_factor",
@@ -102,17 +103,21 @@ def polygon_form_factor(polygons, points, normals):
     return out
 
 
+def outline_factor(start, end, x, n):
+    """Lambert's formula over a whole outline ``start -> end`` seen from (x, n)."""
+    total = 0.0
+    for e in range(len(start)):
+        a, b = start[e], end[e]
+        total += edge_term(
+            a[0] - x[0], a[1] - x[1], a[2] - x[2], b[0] - x[0], b[1] - x[1], b[2] - x[2], n
+        )
+    return abs(total) / (2.0 * math.pi)
+
+
 def contour_form_factor(start, end, points, normals):
     out = np.empty(len(points))
     for i in range(len(points)):
-        x, n = points[i], normals[i]
-        total = 0.0
-        for e in range(len(start)):
-            a, b = start[e], end[e]
-            total += edge_term(
-                a[0] - x[0], a[1] - x[1], a[2] - x[2], b[0] - x[0], b[1] - x[1], b[2] - x[2], n
-            )
-        out[i] = abs(total) / (2.0 * math.pi)
+        out[i] = outline_factor(start, end, points[i], normals[i])
     return out
 
 
@@ -180,13 +185,7 @@ def planar_unoccluded(start, end, points, normals, patch_normal, patch_center, b
         if not top > band:
             continue
         if low >= -band:
-            total = 0.0
-            for e in range(len(start)):
-                a, b = start[e], end[e]
-                total += edge_term(
-                    a[0] - x[0], a[1] - x[1], a[2] - x[2], b[0] - x[0], b[1] - x[1], b[2] - x[2], n
-                )
-            out[i] = abs(total) / (2.0 * math.pi)
+            out[i] = outline_factor(start, end, x, n)
         else:
             out[i] = clipped_outline(start, end, 0, len(start), x, n)
     return out
