@@ -442,7 +442,9 @@ def report(
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     parser.add_argument("--receivers", type=int, nargs="+", default=[20000, 5000])
     parser.add_argument("--per-quad", type=int, default=256)
     parser.add_argument("--along", type=int, default=8)

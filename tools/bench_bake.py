@@ -33,7 +33,9 @@ def _run(argv: list[str]) -> float:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     parser.add_argument("--receivers", type=int, default=5000)
     parser.add_argument("--repeat", type=int, default=1, help="timed runs of each row")
     args = parser.parse_args()

@@ -37,7 +37,9 @@ def scene_files(directory: Path) -> dict[str, Path]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     parser.add_argument("--receivers", type=int, default=5000)
     parser.add_argument("--patches", type=int, default=400)
     parser.add_argument("--tolerance", type=float, default=1e-5)

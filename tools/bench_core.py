@@ -104,7 +104,9 @@ def run(receivers: int, method: str, tolerance: float) -> dict[str, float | int 
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     parser.add_argument(
         "--receivers",
         default="20000,100000",

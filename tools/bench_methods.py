@@ -100,7 +100,9 @@ def _cell(value: float | None, digits: int = 0) -> str:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     parser.add_argument("--receivers", type=int, default=1500)
     parser.add_argument("--patches", type=int, default=150)
     parser.add_argument("--max-shots", type=int, default=40000)

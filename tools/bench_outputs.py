@@ -61,7 +61,9 @@ def _raw_embree(prepared: api.Prepared, camera: Camera, width: int, height: int)
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     parser.add_argument("--receivers", type=int, default=20000)
     parser.add_argument("--sizes", default="512,1024,2048", help="lightmap sides [texels]")
     parser.add_argument(

@@ -262,8 +262,16 @@ def render_table(sizes: list[int], previous: str | None, runs: int) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--receivers", type=int, nargs="+", default=[5000])
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    parser.add_argument(
+        "--receivers",
+        type=int,
+        nargs="+",
+        default=[5000],
+        help="--receivers targets: the pass tables use the first, the render table all",
+    )
     parser.add_argument("--previous", default=None, help="another install's raytrad executable")
     parser.add_argument("--runs", type=int, default=1, help="renders per size and install")
     parser.add_argument("--no-pass", action="store_true", help="skip the pass tables")

@@ -75,7 +75,9 @@ def triangle_probes(scene: Scene, total: int, rng: np.random.Generator) -> acc.P
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     parser.add_argument("--scene", type=Path, default=None, help="a scene file (default: the room)")
     parser.add_argument(
         "--receivers", type=int, nargs="+", default=[3000, 10000], help="targets to bake at"

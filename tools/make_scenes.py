@@ -24,7 +24,9 @@ REPOSITORY = Path(__file__).resolve().parents[1]
 
 def main(argv: list[str] | None = None) -> int:
     """Write the scene files; return the exit status."""
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     parser.add_argument(
         "--out", type=Path, default=REPOSITORY / "scenes", help="output directory [scenes/]"
     )
