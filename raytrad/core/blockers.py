@@ -230,6 +230,18 @@ def blockers(positions: np.ndarray, triangles: np.ndarray, diagonal: float) -> B
     welded = index.reshape(-1, 3)
     points = np.zeros((int(welded.max()) + 1, 3))
     points[welded.reshape(-1)] = corners.reshape(-1, 3)
+    # a sliver whose corners weld together blocks nothing (and has no normal)
+    distinct = (
+        (welded[:, 0] != welded[:, 1])
+        & (welded[:, 1] != welded[:, 2])
+        & (welded[:, 0] != welded[:, 2])
+    )
+    welded = welded[distinct]
+    corners = points[welded]
+    normal = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+    welded = welded[np.linalg.norm(normal, axis=1) > 0]
+    if not len(welded):
+        return None
     planes: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
     spheres: list[tuple[np.ndarray, float]] = []
     for part in _components(welded, len(points)):

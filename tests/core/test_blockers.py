@@ -303,3 +303,16 @@ def test_a_sheet_blocks_once_its_edge_passes_the_shaft_by_the_margin(
     assert found is not None
     fast, reference = classify(found, np.array([[0.0, 1.0, 0.0]]), quad)
     assert fast[0] == reference[0] == blocked
+
+
+def test_a_sliver_that_welds_away_leaves_the_box_a_blocker() -> None:
+    points, triangles = box(np.zeros(3), np.ones(3))
+    corner = points[0]
+    sliver = corner + np.array([[0, 0, 0], [1e-12, 1e-12, 1e-12], [0, 2e-12, 0]])
+    found = bl.blockers(
+        np.concatenate([points, sliver]),
+        np.concatenate([triangles, [[8, 9, 10]]]),
+        DIAGONAL,
+    )
+    assert found is not None and found.count == 1
+    assert np.isfinite(found.normal).all()
