@@ -30,6 +30,8 @@ from raytrad.core.contour import (
 from raytrad.core.gather import (
     EMPTY,
     GATHER_RADII,
+    RULE_POINTS,
+    RULE_WEIGHTS,
     GatherShares,
     GatherWeights,
     SubareaMeans,
@@ -423,34 +425,28 @@ class PairFactors:
             return self._numpy_near_field(x, nx, near, sub)
         bary3, centroids3 = _sub_triangles(3)
         bary2, centroids2 = _sub_triangles(2)
-        cc, tri, target, f, shares, far = fast.near_triangles(
-            np.ascontiguousarray(near, dtype=np.bool_),
-            sub.start,
-            self._sub_ptr,
-            self._sub_tri,
-            self._tri_corners,
-            self.mesh.triangle_normal,
-            np.ascontiguousarray(x, dtype=np.float64),
-            np.ascontiguousarray(nx, dtype=np.float64),
-            tol.horizon * self.diagonal,
-            tol.horizon,
-            tol.ray_offset * self.diagonal,
-            SHARE_SIZES,
-            bary3,
-            centroids3,
-            bary2,
-            centroids2,
-        )
-        if far.any():
-            _far_shares(
-                shares,
-                far,
-                self._tri_corners[tri[far]],
-                self.mesh.triangle_normal[tri[far]],
-                x[cc[far]],
-                nx[cc[far]],
+        return tuple(
+            fast.near_triangles(
+                np.ascontiguousarray(near, dtype=np.bool_),
+                sub.start,
+                self._sub_ptr,
+                self._sub_tri,
+                self._tri_corners,
+                self.mesh.triangle_normal,
+                np.ascontiguousarray(x, dtype=np.float64),
+                np.ascontiguousarray(nx, dtype=np.float64),
+                tol.horizon * self.diagonal,
+                tol.horizon,
+                tol.ray_offset * self.diagonal,
+                SHARE_SIZES,
+                bary3,
+                centroids3,
+                bary2,
+                centroids2,
+                RULE_POINTS,
+                RULE_WEIGHTS,
             )
-        return cc, tri, target, f, shares
+        )
 
     def _numpy_near_field(
         self, x: np.ndarray, nx: np.ndarray, near: np.ndarray, sub: slice
@@ -480,14 +476,11 @@ class PairFactors:
         distance = np.linalg.norm(corners.mean(axis=1) - x[cc], axis=1) / size
         far = distance >= SHARE_SIZES
         if far.any():
-            _far_shares(
-                shares,
-                far,
-                corners[far],
-                self.mesh.triangle_normal[tri[far]],
-                x[cc[far]],
-                nx[cc[far]],
+            raw = corner_form_factors(
+                corners[far], self.mesh.triangle_normal[tri[far]], x[cc[far]], nx[cc[far]]
             )
+            total = raw.sum(axis=1, keepdims=True)
+            shares[far] = np.divide(raw, total, out=shares[far], where=total > 0)
         for levels, lo, hi in ((3, 0.0, 1.0), (2, 1.0, SHARE_SIZES)):
             part = (distance >= lo) & (distance < hi)
             if part.any():
@@ -562,19 +555,3 @@ def numpy_visible_factors(
     )
     visible = np.where(total > 0, 1.0 - hidden / np.where(total > 0, total, 1.0), 0.0)
     return np.asarray(np.where(doubt, unoccluded * np.clip(visible, 0.0, 1.0), unoccluded))
-
-
-def _far_shares(
-    shares: np.ndarray,
-    far: np.ndarray,
-    corners: np.ndarray,
-    normals: np.ndarray,
-    x: np.ndarray,
-    nx: np.ndarray,
-) -> None:
-    """Set ``shares[far]`` to the corner form factors' shares
-    (:func:`~raytrad.core.gather.corner_form_factors`; 1/3 each where the receiver sees
-    none of the rule's points)."""
-    raw = corner_form_factors(corners, normals, x, nx)
-    total = raw.sum(axis=1, keepdims=True)
-    shares[far] = np.divide(raw, total, out=shares[far], where=total > 0)
