@@ -9,7 +9,6 @@ as its numpy reference in :mod:`raytrad.core.gather`; see there for shapes and u
 
 # mypy: ignore-errors
 
-
 import numpy as np
 
 #: Every function to compile, each after the helpers it calls.
