@@ -72,12 +72,24 @@ def pass_hook(
 ) -> Callable[[RadiosityMesh, FormFactorEngine], None]:
     """The form-factor pass's per-column hook: every ``seconds``, ``save`` the state before
     any shot with the engine (whose columns so far go into the checkpoint), so that a run
-    killed during a long pass resumes it instead of starting over."""
+    killed during a long pass resumes it instead of starting over.
+
+    The checkpoint holds every column so far, so it grows with the pass: the next save
+    waits at least :data:`SAVE_SHARE` times as long as the last one took (at 300 000
+    receivers a save writes gigabytes; saving every minute took most of the pass)."""
     last_save = [time.perf_counter()]
+    wait = [seconds]
 
     def on_column(mesh: RadiosityMesh, engine: FormFactorEngine) -> None:
-        if time.perf_counter() - last_save[0] >= seconds:
+        if time.perf_counter() - last_save[0] >= wait[0]:
+            start = time.perf_counter()
             save(new_state(mesh), engine)
             last_save[0] = time.perf_counter()
+            wait[0] = max(seconds, SAVE_SHARE * (last_save[0] - start))
 
     return on_column
+
+
+#: A pass checkpoint waits at least this many times the last save's duration: saving
+#: costs at most about a tenth of the pass.
+SAVE_SHARE = 9.0
