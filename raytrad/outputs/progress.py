@@ -76,7 +76,7 @@ def pass_hook(
 
     The checkpoint holds every column so far, so it grows with the pass: the next save
     waits at least :data:`SAVE_SHARE` times as long as the last one took (at 300 000
-    receivers a save writes gigabytes; saving every minute took most of the pass)."""
+    receivers a save writes gigabytes)."""
     last_save = [time.perf_counter()]
     wait = [seconds]
 
