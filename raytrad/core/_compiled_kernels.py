@@ -23,7 +23,7 @@ KERNELS = (
     "contour_form_factor",
     "clipped_outline",
     "clipped_contour_form_factor",
-    "planar_unoccluded",
+    "planar_contour_form_factor",
     "piecewise_contour_form_factor",
     "_linear_shares",
     "linear_corner_shares",
@@ -164,11 +164,11 @@ def clipped_contour_form_factor(start, end, points, normals):
     return out
 
 
-def planar_unoccluded(start, end, points, normals, patch_normal, patch_center, band):
+def planar_contour_form_factor(start, end, points, normals, patch_normal, patch_center, band):
     """Exact unoccluded factors of a planar patch (outline ``start -> end``): 0 behind it
     or below the receiver's horizon, the whole outline's sum where it lies above, the
-    clipped outline's where it straddles (see :meth:`raytrad.core.pairs.PairFactors._unoccluded`,
-    whose numpy path is the reference)."""
+    clipped outline's where it straddles (see
+    :func:`raytrad.core.contour.numpy_planar_contour_form_factor`, the reference)."""
     out = np.zeros(len(points))
     for i in range(len(points)):
         x, n = points[i], normals[i]

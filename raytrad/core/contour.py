@@ -5,6 +5,8 @@ edges of a triangulated patch cancel. So a patch's factor costs its outline's ed
 however finely it is triangulated:
 
 * :func:`contour_form_factor`: the patch wholly above the receiver's horizon;
+* :func:`planar_contour_form_factor`: either, chosen per receiver (0 behind the patch or
+  with all of it below the horizon), in one pass;
 * :func:`clipped_contour_form_factor`: the patch straddling it (a floor patch running
   under a block, seen from the block's side). The part above the horizon is bounded by
   the outline's edges clipped to the receiver's tangent plane and by cuts along the line
@@ -186,11 +188,87 @@ def numpy_piecewise_contour_form_factor(
     return out
 
 
+def planar_contour_form_factor(
+    start: np.ndarray,
+    end: np.ndarray,
+    points: np.ndarray,
+    normals: np.ndarray,
+    patch_normal: np.ndarray,
+    patch_center: np.ndarray,
+    band: float,
+) -> np.ndarray:
+    """A planar patch's exact unoccluded factor, compiled when available (see
+    :func:`numpy_planar_contour_form_factor`, the reference)."""
+    fast = compiled.get()
+    if fast is None:
+        return numpy_planar_contour_form_factor(
+            start, end, points, normals, patch_normal, patch_center, band
+        )
+    return np.asarray(
+        fast.planar_contour_form_factor(
+            _f64(start),
+            _f64(end),
+            _f64(points),
+            _f64(normals),
+            _f64(patch_normal),
+            _f64(patch_center),
+            float(band),
+        )
+    )
+
+
+def numpy_planar_contour_form_factor(
+    start: np.ndarray,
+    end: np.ndarray,
+    points: np.ndarray,
+    normals: np.ndarray,
+    patch_normal: np.ndarray,
+    patch_center: np.ndarray,
+    band: float,
+) -> np.ndarray:
+    """Exact unoccluded factor of a one-sided planar patch with outline ``start -> end``:
+    0 for receivers not in front of it by more than ``band`` or with all of it below
+    their horizon, the whole outline's sum (:func:`numpy_contour_form_factor`) where it
+    lies above, the clipped outline's (:func:`numpy_clipped_contour_form_factor`) where
+    it straddles. A plane's heights are extreme at its outline's corners.
+
+    Parameters
+    ----------
+    start, end : (E, 3) float64
+        The outline's edges [m].
+    points, normals : (C, 3) float64
+        Receiver positions [m] and unit normals.
+    patch_normal, patch_center : (3,) float64
+        The patch's lit side and centre [m].
+    band : float
+        Heights within it of a plane count as on it [m].
+
+    Returns
+    -------
+    (C,) float64 form factors [1].
+    """
+    height = start @ normals.T - np.einsum("cj,cj->c", points, normals)[None, :]  # (E, C)
+    facing = (points - patch_center) @ patch_normal > band
+    top = np.where(facing, height.max(axis=0), -np.inf)
+    above = (height.min(axis=0) >= -band) & (top > band)
+    out = np.zeros(len(points))
+    if above.any():
+        out[above] = numpy_contour_form_factor(start, end, points[above], normals[above])
+    straddle = ~above & (top > band)
+    if straddle.any():
+        out[straddle] = numpy_clipped_contour_form_factor(
+            start, end, points[straddle], normals[straddle]
+        )
+    return out
+
+
 __all__ = [
     "clipped_contour_form_factor",
     "contour_form_factor",
     "numpy_clipped_contour_form_factor",
     "numpy_contour_form_factor",
     "numpy_piecewise_contour_form_factor",
+    "numpy_planar_contour_form_factor",
     "piecewise_contour_form_factor",
+    "planar_contour_form_factor",
 ]

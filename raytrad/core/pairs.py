@@ -22,11 +22,7 @@ import numpy as np
 from raytrad.constants import tol
 from raytrad.core import compiled
 from raytrad.core.blockers import Blockers, blockers, target_corners
-from raytrad.core.contour import (
-    clipped_contour_form_factor,
-    contour_form_factor,
-    piecewise_contour_form_factor,
-)
+from raytrad.core.contour import piecewise_contour_form_factor, planar_contour_form_factor
 from raytrad.core.gather import (
     EMPTY,
     GATHER_RADII,
@@ -344,51 +340,27 @@ class PairFactors:
         hemisphere.
         """
         m = self.mesh
-        a, b = self._edge_ptr[patch], self._edge_ptr[patch + 1]
-        planar = bool(m.patch_planar[patch])
-        fast = compiled.get()
-        if planar and fast is not None:  # the same in one compiled loop
-            return np.asarray(
-                fast.planar_unoccluded(
-                    self._edge_start[a:b],
-                    self._edge_end[a:b],
-                    np.ascontiguousarray(x, dtype=np.float64),
-                    np.ascontiguousarray(nx, dtype=np.float64),
-                    m.patch_normal[patch],
-                    m.patch_center[patch],
-                    tol.horizon * self.diagonal,
-                )
-            )
-        if planar:  # a plane's heights are extreme at its outline's corners
-            verts = self._edge_start[a:b]
-        else:  # and a folded patch's at its pieces' outlines' corners
-            pieces = self._pieces
-            first, last = pieces.patch_ptr[patch], pieces.patch_ptr[patch + 1]
-            verts = pieces.start[pieces.edge_ptr[first] : pieces.edge_ptr[last]]
-        height = verts @ nx.T - np.einsum("cj,cj->c", x, nx)[None, :]  # (Vp, C)
         band = tol.horizon * self.diagonal
-        top = height.max(axis=0)
-        above = (height.min(axis=0) >= -band) & (top > band) & planar
-        if planar:  # nothing reaches the back of a one-sided patch
-            facing = (x - m.patch_center[patch]) @ m.patch_normal[patch] > band
-            above &= facing
-            top = np.where(facing, top, -np.inf)
+        if m.patch_planar[patch]:
+            a, b = self._edge_ptr[patch], self._edge_ptr[patch + 1]
+            return planar_contour_form_factor(
+                self._edge_start[a:b],
+                self._edge_end[a:b],
+                x,
+                nx,
+                m.patch_normal[patch],
+                m.patch_center[patch],
+                band,
+            )
+        # a folded patch's heights are extreme at its pieces' outlines' corners
+        pieces = self._pieces
+        first, last = pieces.patch_ptr[patch], pieces.patch_ptr[patch + 1]
+        verts = pieces.start[pieces.edge_ptr[first] : pieces.edge_ptr[last]]
+        top = (verts @ nx.T).max(axis=0) - np.einsum("cj,cj->c", x, nx)
         out = np.zeros(len(x))
-        if above.any():
-            out[above] = contour_form_factor(
-                self._edge_start[a:b], self._edge_end[a:b], x[above], nx[above]
-            )
-        straddle = ~above & (top > band)
-        if straddle.any():
-            out[straddle] = (
-                clipped_contour_form_factor(
-                    self._edge_start[a:b], self._edge_end[a:b], x[straddle], nx[straddle]
-                )
-                if planar
-                else piecewise_contour_form_factor(
-                    self._pieces, patch, x[straddle], nx[straddle], band
-                )
-            )
+        seen = top > band
+        if seen.any():
+            out[seen] = piecewise_contour_form_factor(pieces, patch, x[seen], nx[seen], band)
         return out
 
     def _triangle_factors(self, x: np.ndarray, nx: np.ndarray, tri: np.ndarray) -> np.ndarray:

@@ -101,7 +101,7 @@ def test_compiled_visible_factors_match_numpy(seed: int) -> None:
 
 
 @pytest.mark.skipif(compiled.get() is None, reason="needs the compiled kernels")
-def test_compiled_planar_unoccluded_matches_numpy(
+def test_compiled_planar_contour_form_factor_matches_numpy(
     cornell: Prepared, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     """The planar patches' one-loop compiled factor against the numpy path, from random
