@@ -51,6 +51,7 @@ import numpy as np
 from raytrad.constants import tol
 from raytrad.core import compiled
 from raytrad.core.shafts import _plane_hull
+from raytrad.scene.model import triangle_areas_normals
 
 log = logging.getLogger(__name__)
 
@@ -221,9 +222,7 @@ def blockers(positions: np.ndarray, triangles: np.ndarray, diagonal: float) -> B
     """
     corners = np.asarray(positions, dtype=np.float64)[np.asarray(triangles)]
     flat = tol.horizon * diagonal
-    normal = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
-    area2 = np.linalg.norm(normal, axis=1)
-    corners = corners[area2 > 0]
+    corners = corners[triangle_areas_normals(corners)[0] > 0]
     if not 0 < len(corners) <= MAX_TRIANGLES:
         return None
     _, index = np.unique(np.round(corners.reshape(-1, 3) / flat), axis=0, return_inverse=True)
@@ -231,15 +230,7 @@ def blockers(positions: np.ndarray, triangles: np.ndarray, diagonal: float) -> B
     points = np.zeros((int(welded.max()) + 1, 3))
     points[welded.reshape(-1)] = corners.reshape(-1, 3)
     # a sliver whose corners weld together blocks nothing (and has no normal)
-    distinct = (
-        (welded[:, 0] != welded[:, 1])
-        & (welded[:, 1] != welded[:, 2])
-        & (welded[:, 0] != welded[:, 2])
-    )
-    welded = welded[distinct]
-    corners = points[welded]
-    normal = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
-    welded = welded[np.linalg.norm(normal, axis=1) > 0]
+    welded = welded[triangle_areas_normals(points[welded])[0] > 0]
     if not len(welded):
         return None
     planes: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
@@ -300,9 +291,7 @@ def _convex(
         return None
     used = np.unique(triangles)
     corners = points[triangles]
-    normal = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
-    area = 0.5 * np.linalg.norm(normal, axis=1)
-    normal /= (2.0 * area)[:, None]
+    area, normal = triangle_areas_normals(corners)
     offset = np.einsum("tj,tj->t", normal, corners[:, 0])
     height = points[used] @ normal.T - offset  # (U, T)
     if (np.abs(height) <= flat).all():
