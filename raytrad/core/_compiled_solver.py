@@ -83,8 +83,8 @@ def shoot(
     """One shot through a cached column, in place (see
     :func:`raytrad.core.solver.numpy_shoot`, the reference, for the steps). Returns the
     power caught by the receivers, the power they reflect ((3,) each, [W]) and
-    ``sum_j a_j F_jp`` [m2]. The patch's sub-areas ``sub_lo:sub_hi`` get the means of
-    its receivers' shots at ``scratch[base + s]`` (their CSR ``mean_*``)."""
+    ``sum_j a_j F_jp`` [m2]. The patch's sub-areas and clusters (nodes ``sub_lo:sub_hi``)
+    get the means of its receivers' shots at ``scratch[base + s]`` (their CSR ``mean_*``)."""
     n = len(entries)
     own = np.empty((n, 3))
     mean = np.zeros(3)

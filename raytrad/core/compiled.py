@@ -8,7 +8,8 @@ small temporaries; here each pair is one loop, compiled once (``cache=True``, so
 processes load it from disk) and run without the GIL (``nogil=True``), so the
 form-factor engine's threads run on every core.
 
-:mod:`raytrad.core.kernels`, :mod:`raytrad.core.contour` and :mod:`raytrad.core.gather`
+:mod:`raytrad.core.kernels`, :mod:`raytrad.core.contour`, :mod:`raytrad.core.gather`,
+:mod:`raytrad.core.spread`, :mod:`raytrad.core.clusters` and :mod:`raytrad.core.pairs`
 keep the numpy implementations as the reference: every function here computes the same
 formula in the same order, and the tests compare the two to 1e-12 on random and
 adversarial pairs (grazing, coplanar, straddling the horizon).
@@ -61,12 +62,20 @@ def _build() -> SimpleNamespace | None:
     from raytrad.core import (
         _compiled_gather,
         _compiled_kernels,
+        _compiled_near,
         _compiled_shafts,
         _compiled_solver,
     )
 
     kernels = {}
-    for loops in (_compiled_kernels, _compiled_gather, _compiled_shafts, _compiled_solver):
+    modules = (
+        _compiled_kernels,
+        _compiled_near,
+        _compiled_gather,
+        _compiled_shafts,
+        _compiled_solver,
+    )
+    for loops in modules:
         for name in loops.KERNELS:
             if not hasattr(getattr(loops, name), "py_func"):  # not compiled yet
                 setattr(loops, name, _jit(numba, getattr(loops, name)))

@@ -9,9 +9,9 @@ the bias does not shrink with more receivers, only with smaller patches.
 
 So for every (receiver, patch) pair nearer than :data:`GATHER_RADII` patch radii, the
 form-factor engine also keeps where on the patch the receiver's visible factor comes
-from: the visible weight of each sub-area sample (disk approximation) and of each near
-triangle (exact factor), spread onto the patch's receivers (a triangle over its corners,
-a sub-area over its triangles by area). The gathered radiosity is then
+from: the visible weight of each sub-area sample and cluster (disk approximation) and of
+each near triangle (exact factor), spread onto the patch's receivers and onto the means
+of its sub-areas and clusters (:mod:`raytrad.core.spread`). The gathered radiosity is then
 
     B̃_jp = sum_k g_jpk B_k,       sum_k g_jpk = 1,
 
@@ -23,11 +23,11 @@ solution as a correction that is itself shot on (:func:`raytrad.core.solver.solv
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 
 from raytrad.core import compiled
+from raytrad.core.clusters import Clusters, build_clusters, runs
 from raytrad.core.mesh import RadiosityMesh
 
 #: Pairs whose receiver is nearer than this many patch radii to the patch's centre gather
@@ -38,6 +38,9 @@ GATHER_RADII = 6.0
 #: spreads the receiver's weight of it by what the receiver sees of each of its triangles'
 #: corners (:func:`corner_form_factors`); a farther one by area over its receivers.
 MIDPOINT_SIZES = 5.0
+#: Node slots (a triangle counted once for each node holding it) per batch while the
+#: means are summed: bounds the temporaries at a million receivers.
+MEAN_SLOTS = 1 << 21
 
 
 @dataclass(frozen=True)
@@ -155,33 +158,39 @@ def gathered_irradiance(
 
 @dataclass(frozen=True)
 class SubareaMeans:
-    """Each sub-area's mean radiosity as a source of the near-field gather.
+    """Each sub-area's and cluster's mean radiosity as a source of the near-field gather.
 
     A receiver far from a sub-area (beyond :data:`MIDPOINT_SIZES` of its sizes) spreads
     its weight of the sub-area by area over the sub-area's visible receivers: that says
     no more than their area-weighted mean. So its gather weights name the mean instead,
     as source ``base + s``, one entry whatever the sub-area's receiver count (which grows
-    with refinement); :meth:`extend` appends the means to a radiosity.
+    with refinement); :meth:`extend` appends the means to a radiosity. The clusters inside
+    a sub-area (:mod:`raytrad.core.clusters`) are sources the same way, one entry for a
+    cluster far from the receiver in its own sizes; node ``n`` of the cluster tree is
+    source ``base + n`` (sub-area ``s`` is node ``s`` where no sub-area is split).
 
     Attributes
     ----------
     base : int
         The mesh's receiver count.
-    pointer : (SA + 1,) int64
-        CSR pointers into ``receivers`` and ``shares`` by sub-area.
+    pointer : (N + 1,) int64
+        CSR pointers into ``receivers`` and ``shares`` by node.
     receivers : (Q,) int64
-        Each sub-area's visible receivers (corners of its triangles).
+        Each node's visible receivers (corners of its triangles).
     shares : (Q,) float64
-        Their area shares, summing to 1 per sub-area with any.
+        Their area shares, summing to 1 per node with any.
+    patch_ptr : (P + 1,) int64
+        Each patch's nodes (CSR pointers; a shot makes its patch's means).
     """
 
     base: int
     pointer: np.ndarray
     receivers: np.ndarray
     shares: np.ndarray
+    patch_ptr: np.ndarray
 
     def extend(self, radiosity: np.ndarray) -> np.ndarray:
-        """(R + SA, 3) the (R, 3) receiver ``radiosity`` followed by its sub-area means.
+        """(R + N, 3) the (R, 3) receiver ``radiosity`` followed by its nodes' means.
 
         Raises
         ------
@@ -193,11 +202,11 @@ class SubareaMeans:
             raise ValueError(f"radiosity of {len(radiosity)} receivers for a mesh of {self.base}")
         return np.concatenate([radiosity, self.of(np.arange(len(self.pointer) - 1), radiosity)])
 
-    def of(self, subareas: np.ndarray, radiosity: np.ndarray) -> np.ndarray:
-        """(K, 3) means of ``radiosity`` ((R, 3) or longer) over the (K,) ``subareas``."""
-        owner, index = _csr_slots(self.pointer, subareas)
+    def of(self, nodes: np.ndarray, radiosity: np.ndarray) -> np.ndarray:
+        """(K, 3) means of ``radiosity`` ((R, 3) or longer) over the (K,) ``nodes``."""
+        owner, index = _csr_slots(self.pointer, nodes)
         values = self.shares[index, None] * radiosity[self.receivers[index]]
-        count = len(subareas)
+        count = len(nodes)
         means = [np.bincount(owner, weights=values[:, k], minlength=count) for k in range(3)]
         return np.stack(means, axis=1)
 
@@ -210,11 +219,9 @@ def subarea_triangles(mesh: RadiosityMesh) -> tuple[np.ndarray, np.ndarray]:
 
 
 def subarea_means(mesh: RadiosityMesh) -> SubareaMeans:
-    """The sub-area means of ``mesh`` (as :class:`GatherShares` makes them)."""
+    """The sub-area and cluster means of ``mesh`` (as :class:`GatherShares` makes them)."""
     sub_tri, sub_ptr = subarea_triangles(mesh)
-    corner_share = corner_shares(mesh)
-    tri_share = _area_shares(mesh, corner_share, sub_tri, sub_ptr)
-    return _means(mesh, corner_share, tri_share, sub_tri, sub_ptr)
+    return cluster_means(mesh, corner_shares(mesh), build_clusters(mesh, sub_tri, sub_ptr))
 
 
 def corner_shares(mesh: RadiosityMesh) -> np.ndarray:
@@ -230,216 +237,37 @@ def corner_shares(mesh: RadiosityMesh) -> np.ndarray:
     return np.divide(share, counts, out=np.zeros_like(share), where=counts > 0)
 
 
-def _area_shares(
-    mesh: RadiosityMesh, corner_share: np.ndarray, sub_tri: np.ndarray, sub_ptr: np.ndarray
-) -> np.ndarray:
-    """(T,) area share of ``sub_tri[k]`` in its sub-area (0 for triangles none sees)."""
-    area = mesh.triangle_area[sub_tri] * (corner_share[sub_tri].sum(axis=1) > 0)
-    owner = np.repeat(np.arange(len(sub_ptr) - 1), np.diff(sub_ptr))
-    total = np.bincount(owner, weights=area, minlength=len(sub_ptr) - 1)
-    return np.divide(area, total[owner], out=np.zeros_like(area), where=total[owner] > 0)
-
-
-def _means(
-    mesh: RadiosityMesh,
-    corner_share: np.ndarray,
-    tri_share: np.ndarray,
-    sub_tri: np.ndarray,
-    sub_ptr: np.ndarray,
-) -> SubareaMeans:
-    owner = np.repeat(np.arange(len(sub_ptr) - 1), np.diff(sub_ptr))
-    pointer, receivers, shares = numpy_sum_shares(
-        np.repeat(owner, 3),
-        mesh.triangle_receivers[sub_tri].reshape(-1),
-        (tri_share[:, None] * corner_share[sub_tri]).reshape(-1),
-        len(sub_ptr) - 1,
-    )
-    return SubareaMeans(mesh.receiver_count, pointer, receivers, shares)
-
-
-class GatherShares:
-    """How a unit of visible weight on a triangle or a sub-area spreads over receivers.
-
-    A near triangle's weight goes to its visible corners by the shares it comes with
-    (what the receiver sees of each part of it); a sub-area's to its triangles' visible
-    corners by :func:`corner_form_factors`, what the receiver sees of each corner's
-    part (by area where the receiver sees none of it). Hidden receivers (shut in
-    under a block) get nothing: their radiosity is not what the triangle shows.
-    """
-
-    def __init__(self, mesh: RadiosityMesh, sub_tri: np.ndarray, sub_ptr: np.ndarray) -> None:
-        #: (T, 3) share of each corner of each triangle (0 for hidden corners)
-        self.corner_share = corner_shares(mesh)
-        self.corners = mesh.triangle_receivers
-        # sub-area s: its triangles (sub_tri[sub_ptr[s]:sub_ptr[s+1]]) weighted by area
-        self.sub_tri = sub_tri
-        self.sub_ptr = sub_ptr
-        self.tri_share = _area_shares(mesh, self.corner_share, sub_tri, sub_ptr)
-        self.tri_corners = mesh.positions[mesh.triangles]
-        self.tri_normal = mesh.triangle_normal
-        self.sub_point = mesh.subarea_point
-        self.sub_reach = MIDPOINT_SIZES * mesh.subarea_size
-        #: each sub-area's mean: the source of far receivers' weights of it
-        self.means = _means(mesh, self.corner_share, self.tri_share, sub_tri, sub_ptr)
-
-    def spread(
-        self,
-        sub_pair: np.ndarray,
-        subareas: np.ndarray,
-        sub_weight: np.ndarray,
-        tri_pair: np.ndarray,
-        triangles: np.ndarray,
-        tri_weight: np.ndarray,
-        tri_share: np.ndarray,
-        points: np.ndarray,
-        normals: np.ndarray,
-    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Receiver shares of element weights, summed per (pair, receiver).
-
-        Parameters
-        ----------
-        sub_pair, subareas, sub_weight : (A,) int, int, float
-            Pair index, global sub-area and visible weight of sub-area elements.
-        tri_pair, triangles, tri_weight : (B,) int, int, float
-            Pair index, triangle and visible weight of triangle elements.
-        tri_share : (B, 3) float
-            How each triangle element's weight splits over its corners (rows summing to
-            1); hidden corners' shares go to the visible ones.
-        points, normals : (pairs, 3) float
-            Each pair's receiver position [m] and unit normal.
-
-        Returns
-        -------
-        pointer : (pairs + 1,) int64
-        sources : (S,) int64
-        weights : (S,) float64, normalised to sum 1 per pair (pairs with no weight: empty)
-        """
-        sub_pairs, sub_sources, sub_weights = subarea_spread(
-            sub_pair,
-            subareas,
-            sub_weight,
-            self.sub_ptr,
-            self.sub_tri,
-            self.tri_share,
-            self.corner_share,
-            self.corners,
-            self.tri_corners,
-            self.tri_normal,
-            points,
-            normals,
-            self.sub_point,
-            self.sub_reach,
-            self.means.pointer,
-            self.means.base,
+def cluster_means(mesh: RadiosityMesh, corner_share: np.ndarray, tree: Clusters) -> SubareaMeans:
+    """Each node of ``tree`` (sub-areas and their clusters) as an area-weighted mean of its
+    visible receivers: a triangle weighs its area if any corner is visible (``corner_share``
+    (T, 3), :func:`corner_shares`), split over those corners."""
+    visible_area = mesh.triangle_area * (corner_share.sum(axis=1) > 0)
+    lengths = np.cumsum(tree.stop - tree.start)
+    pointers, receivers, shares = [np.zeros(1, np.int64)], [], []
+    first = 0
+    while first < tree.count:  # nodes share slots with their halves: a few million at a time
+        last = max(first + 1, int(np.searchsorted(lengths, lengths[first] + MEAN_SLOTS)))
+        owner, slots = runs(tree.start[first:last], tree.stop[first:last])
+        tri = tree.sub_tri[slots]
+        area = visible_area[tri]
+        total = np.bincount(owner, weights=area, minlength=last - first)[owner]
+        share = np.divide(area, total, out=np.zeros_like(area), where=total > 0)
+        pointer, part_receivers, part_shares = numpy_sum_shares(
+            np.repeat(owner, 3),
+            mesh.triangle_receivers[tri].reshape(-1),
+            (share[:, None] * corner_share[tri]).reshape(-1),
+            last - first,
         )
-        seen = self.corner_share[triangles] > 0
-        own = np.where(seen, tri_share, 0.0)
-        total = own.sum(axis=1, keepdims=True)
-        own = np.divide(own, total, out=self.corner_share[triangles].copy(), where=total > 0)
-        pair = np.concatenate([sub_pairs, np.repeat(tri_pair, 3)])
-        source = np.concatenate([sub_sources, self.corners[triangles].reshape(-1)])
-        weight = np.concatenate([sub_weights, (tri_weight[:, None] * own).reshape(-1)])
-        return sum_shares(pair, source, weight, len(points))
-
-
-def subarea_spread(*arrays: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Sub-area elements' weights on their triangles' corners, compiled when available
-    (see :func:`numpy_subarea_spread`, the reference, for the arguments)."""
-    fast = compiled.get()
-    if fast is None:
-        return numpy_subarea_spread(*arrays)
-    *given, base = arrays
-    ints = (0, 1, 3, 4, 7, 14)
-    cast = [
-        np.ascontiguousarray(a, dtype=np.int64 if i in ints else np.float64)
-        for i, a in enumerate(given)
-    ]
-    pair, source, weight = fast.subarea_spread(*cast, int(base), RULE_POINTS, RULE_WEIGHTS)
-    return pair, source, weight
-
-
-def numpy_subarea_spread(
-    sub_pair: np.ndarray,
-    subareas: np.ndarray,
-    sub_weight: np.ndarray,
-    sub_ptr: np.ndarray,
-    sub_tri: np.ndarray,
-    tri_share: np.ndarray,
-    corner_share: np.ndarray,
-    corners: np.ndarray,
-    tri_corners: np.ndarray,
-    tri_normal: np.ndarray,
-    points: np.ndarray,
-    normals: np.ndarray,
-    sub_point: np.ndarray,
-    sub_reach: np.ndarray,
-    src_ptr: np.ndarray,
-    base: int,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Where on a sub-area a receiver's visible weight of it lies, as corner weights.
-
-    Within ``sub_reach`` of the sub-area's sample point, each corner of each of the
-    sub-area's triangles weighs what the receiver sees of its part of the triangle
-    (:func:`corner_form_factors`, a form factor), a hidden corner's weight going to
-    the triangle's visible ones in proportion; where the receiver sees none of it, by
-    area over them. A sub-area farther away hands its sampled weight to its mean
-    (source ``base + s``, :class:`SubareaMeans`): spread by area over its receivers, as
-    it would be, it would say no more than the mean, at the cost of an entry for each of
-    them, and their count grows with refinement.
-
-    Parameters
-    ----------
-    sub_pair, subareas, sub_weight : (A,) int64, int64, float64
-        Pair index, global sub-area and sampled visible weight of each element.
-    sub_ptr : (SA + 1,) int64
-        CSR pointers of the sub-areas' triangles into ``sub_tri``.
-    sub_tri : (T,) int64
-        Triangles grouped by sub-area.
-    tri_share : (T,) float64
-        Area share of ``sub_tri[k]`` in its sub-area (0 for triangles no one sees).
-    corner_share : (T, 3) float64
-        Share of each triangle's corners, 0 for hidden ones (rows sum to 1 or 0).
-    corners : (T, 3) int64
-        Each triangle's receivers.
-    tri_corners : (T, 3, 3) float64
-        Corner positions [m].
-    tri_normal : (T, 3) float64
-        Unit normals.
-    points, normals : (pairs, 3) float64
-        Each pair's receiver position [m] and unit normal.
-    sub_point, sub_reach : (SA, 3), (SA,) float64
-        Sub-areas' sample points and the distance within which they spread by
-        :func:`corner_form_factors` [m].
-    src_ptr : (SA + 1,) int64
-        CSR pointers of each sub-area's visible receivers (:class:`SubareaMeans`); a
-        sub-area with none gets nothing.
-    base : int
-        The receiver count: sub-area ``s``'s mean is source ``base + s``.
-
-    Returns
-    -------
-    pair, source : (N,) int64
-        Pair and receiver (or ``base`` + sub-area) of each weight.
-    weight : (N,) float64 >= 0
-    """
-    far = np.linalg.norm(points[sub_pair] - sub_point[subareas], axis=1) > sub_reach[subareas]
-    handed = far & (src_ptr[subareas + 1] > src_ptr[subareas])  # a mean to hand on to
-    near = np.flatnonzero(~far)
-    element, slot = _csr_slots(sub_ptr, subareas[near])
-    tri = sub_tri[slot]
-    share = corner_share[tri]
-    pair = sub_pair[near][element]
-    raw = corner_form_factors(tri_corners[tri], tri_normal[tri], points[pair], normals[pair])
-    kept = np.where(share > 0, raw, 0.0)
-    seen = kept.sum(axis=1)
-    kept *= np.divide(raw.sum(axis=1), seen, out=np.zeros_like(seen), where=seen > 0)[:, None]
-    total = np.bincount(element, weights=kept.sum(axis=1), minlength=len(near))[element]
-    by_area = (sub_weight[near][element] * tri_share[slot])[:, None] * share
-    weight = np.where(total[:, None] > 0, kept, by_area)
-    return (
-        np.concatenate([sub_pair[handed], np.repeat(pair, 3)]),
-        np.concatenate([base + subareas[handed], corners[tri].reshape(-1)]),
-        np.concatenate([sub_weight[handed], weight.reshape(-1)]),
+        pointers.append(pointer[1:] + pointers[-1][-1])
+        receivers.append(part_receivers)
+        shares.append(part_shares)
+        first = last
+    return SubareaMeans(
+        mesh.receiver_count,
+        np.concatenate(pointers),
+        np.concatenate(receivers),
+        np.concatenate(shares),
+        tree.patch_ptr,
     )
 
 
@@ -450,66 +278,6 @@ def _csr_slots(pointer: np.ndarray, rows: np.ndarray) -> tuple[np.ndarray, np.nd
     owner = np.repeat(np.arange(len(rows)), counts)
     index = np.repeat(pointer[rows] - np.cumsum(counts) + counts, counts)
     return owner, index + np.arange(len(owner))
-
-
-#: The points of :func:`corner_form_factors`' rule as barycentric coordinates (9, 3), and
-#: their weights (9,): the edge-midpoint rule on each of the four triangles a midpoint
-#: split makes, i.e. the quarter points of the edges (weight 1) and the midpoints of the
-#: inner edges (weight 2, each shared by two parts).
-RULE_POINTS = np.array(
-    [
-        [0.75, 0.25, 0.0],
-        [0.25, 0.75, 0.0],
-        [0.0, 0.75, 0.25],
-        [0.0, 0.25, 0.75],
-        [0.25, 0.0, 0.75],
-        [0.75, 0.0, 0.25],
-        [0.5, 0.25, 0.25],
-        [0.25, 0.5, 0.25],
-        [0.25, 0.25, 0.5],
-    ]
-)
-RULE_WEIGHTS = np.array([1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 2.0, 2.0, 2.0])
-
-
-def corner_form_factors(
-    triangles: np.ndarray, triangle_normals: np.ndarray, points: np.ndarray, normals: np.ndarray
-) -> np.ndarray:
-    """(N, 3) unoccluded form factor from a receiver to each corner's part of a triangle:
-    the integral over the triangle of the point-to-point kernel
-    ``cos(theta_r) cos(theta_s) / (pi r**2)`` times the corner's barycentric coordinate.
-
-    For far sub-areas, whose single sample says how much of them a receiver sees but not
-    where: spreading that weight equally over the corners would give a receiver just above
-    a floor the floor's mean across the sub-area, when it sees mostly the part nearest it.
-    Integrated by the edge-midpoint rule (exact for quadratics) on the triangle's four
-    midpoint-split parts (:data:`RULE_POINTS`, 9 kernel values): at 2 triangle sizes from
-    the receiver, the corner shares are within 0.002 of the exact ones and the sum within
-    0.1 % of the exact factor (the plain edge-midpoint rule: 0.02 and 1 %).
-
-    Parameters
-    ----------
-    triangles : (N, 3, 3) float64
-        Corners [m].
-    triangle_normals : (N, 3) float64
-        Their unit normals.
-    points, normals : (N, 3) float64
-        Receiver positions [m] and unit normals.
-
-    Returns
-    -------
-    (N, 3) float64 >= 0 [1]; all 0 where the receiver sees none of the rule's points.
-    """
-    at = np.einsum("qk,nkj->nqj", RULE_POINTS, triangles)
-    d = at - points[:, None, :]
-    r2 = np.einsum("nqj,nqj->nq", d, d)
-    cos_r = np.maximum(np.einsum("nqj,nj->nq", d, normals), 0.0)
-    cos_s = np.maximum(-np.einsum("nqj,nj->nq", d, triangle_normals), 0.0)
-    kernel = np.divide(cos_r * cos_s, r2 * r2, out=np.zeros_like(r2), where=r2 > 0)
-    area = 0.5 * np.linalg.norm(
-        np.cross(triangles[:, 1] - triangles[:, 0], triangles[:, 2] - triangles[:, 0]), axis=1
-    )
-    return area[:, None] / (12.0 * np.pi) * ((kernel * RULE_WEIGHTS) @ RULE_POINTS)
 
 
 def sum_shares(

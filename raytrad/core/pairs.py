@@ -4,7 +4,9 @@ The unoccluded factor is exact (Lambert's formula over the patch's outline, clip
 receiver's horizon where the patch straddles it, :mod:`raytrad.core.contour`);
 visibility scales it by the visible fraction of the patch seen through its sub-area
 sample points, each weighted by its disk-approximation factor, or, for sub-areas nearer
-than :data:`NEAR_FACTOR` sizes, through each of their triangles weighted exactly. For
+than :data:`NEAR_FACTOR` sizes, through their clusters (:mod:`raytrad.core.clusters`)
+as far from the receiver in their own sizes, and the rest of their triangles, each
+weighted exactly. For
 receivers near the patch the same samples say where on the patch the visible factor
 comes from (the near-field gather weights, :mod:`raytrad.core.gather`). The per-pair
 loops run compiled (:mod:`raytrad.core.kernels`, :mod:`raytrad.core.contour`,
@@ -22,16 +24,13 @@ import numpy as np
 from raytrad.constants import tol
 from raytrad.core import compiled
 from raytrad.core.blockers import Blockers, blockers, target_corners
+from raytrad.core.clusters import disk_factors, runs
 from raytrad.core.contour import piecewise_contour_form_factor, planar_contour_form_factor
 from raytrad.core.gather import (
     EMPTY,
     GATHER_RADII,
-    RULE_POINTS,
-    RULE_WEIGHTS,
-    GatherShares,
     GatherWeights,
     SubareaMeans,
-    corner_form_factors,
     subarea_triangles,
 )
 from raytrad.core.kernels import (
@@ -45,6 +44,7 @@ from raytrad.core.kernels import (
 from raytrad.core.mesh import RadiosityMesh
 from raytrad.core.outline import boundary_edges, folded_pieces, patch_vertices
 from raytrad.core.shafts import Facets, facets
+from raytrad.core.spread import RULE_POINTS, RULE_WEIGHTS, GatherShares, corner_form_factors
 from raytrad.core.visibility import Occluder
 
 #: A sub-area nearer than this multiple of its bounding-box diagonal has its visibility
@@ -141,9 +141,12 @@ class PairFactors:
     def _triangle_tables(self) -> None:
         """The tables that follow the mesh's triangles (rebuilt on a refined mesh)."""
         mesh = self.mesh
-        self._sub_tri, self._sub_ptr = subarea_triangles(mesh)
         self._tri_corners = mesh.positions[mesh.triangles]
-        self._shares = GatherShares(mesh, self._sub_tri, self._sub_ptr)
+        self._shares = GatherShares(mesh, *subarea_triangles(mesh))
+        self._tree = self._shares.tree
+        #: within this distance of a node [m] the near field resolves it further
+        self._node_near = NEAR_FACTOR * self._tree.size
+        self._node_target = self._tree.point + tol.ray_offset * self.diagonal * self._tree.normal
 
     def refined(self, mesh: RadiosityMesh) -> PairFactors:
         """The same pairs on a refinement of this mesh (same patches and sub-areas, its
@@ -228,19 +231,29 @@ class PairFactors:
         sampled = doubt | close
         if not sampled.any():
             return unoccluded, 0, EMPTY
-        weight, far, near_c, near_tri, near_target, near_w, near_share = self._samples(
-            x, nx, sampled, sub
+        weight, far, tri_items, node_items = self._samples(x, nx, sampled, sub)
+        near_c, near_tri, near_target, near_w, near_share = tri_items
+        node_c, node, node_target, node_w = node_items
+        factors, far_hidden, hidden, rays = self._visibility(
+            unoccluded,
+            doubt,
+            origins,
+            sub,
+            weight,
+            far,
+            np.concatenate([near_c, node_c]),
+            np.concatenate([near_target, node_target]),
+            np.concatenate([near_w, node_w]),
         )
-        factors, far_hidden, near_hidden, rays = self._visibility(
-            unoccluded, doubt, origins, sub, weight, far, near_c, near_target, near_w
-        )
+        near_hidden, node_hidden = hidden[: len(near_c)], hidden[len(near_c) :]
         pair = np.cumsum(close) - 1
         far_c, far_s = np.nonzero(far & close[:, None] & ~far_hidden)
         n = close[near_c] & ~near_hidden
+        h = close[node_c] & ~node_hidden
         pointer, sources, shares = self._shares.spread(
-            pair[far_c],
-            far_s + sub.start,
-            weight[far_c, far_s],
+            pair[np.concatenate([far_c, node_c[h]])],
+            np.concatenate([self._tree.root[far_s + sub.start], node[h]]),
+            np.concatenate([weight[far_c, far_s], node_w[h]]),
             pair[near_c[n]],
             near_tri[n],
             near_w[n],
@@ -271,7 +284,7 @@ class PairFactors:
         -------
         factors : (C,) float64, visible factors
         far_hidden : (C, S) bool, blocked far samples
-        near_hidden : (B,) bool, blocked near triangles
+        near_hidden : (B,) bool, blocked near items (triangles and clusters)
         rays : int
         """
         far_hidden = np.zeros_like(far)
@@ -299,16 +312,15 @@ class PairFactors:
 
     def _samples(
         self, x: np.ndarray, nx: np.ndarray, sees: np.ndarray, sub: slice
-    ) -> tuple[np.ndarray, ...]:
+    ) -> tuple[np.ndarray, np.ndarray, tuple[np.ndarray, ...], tuple[np.ndarray, ...]]:
         """The weighted visibility samples of the receivers that see the patch.
 
         Returns
         -------
         weight : (C, S) float64, disk factors of far samples (0 elsewhere)
         far : (C, S) bool, the far samples
-        near_c, near_tri, near_target, near_w, near_share : (B,), (B,), (B, 3), (B,),
-            (B, 3), chunk receiver, triangle, ray target [m], exact factor and corner
-            shares of near triangles
+        triangles : near triangles (:meth:`_near_field`)
+        clusters : near sub-areas' clusters taken whole (:meth:`_near_field`)
         """
         m = self.mesh
         weight, far, near = sample_weights(
@@ -325,8 +337,8 @@ class PairFactors:
         near &= sees[:, None]
         far &= sees[:, None]
         weight[~sees] = 0.0
-        near_c, near_tri, near_target, near_w, near_share = self._near_field(x, nx, near, sub)
-        return weight, far, near_c, near_tri, near_target, near_w, near_share
+        items = self._near_field(x, nx, near, sub)
+        return weight, far, items[:5], items[5:]
 
     def _unoccluded(self, x: np.ndarray, nx: np.ndarray, patch: int) -> np.ndarray:
         """Exact unoccluded F(receiver <- patch).
@@ -377,8 +389,13 @@ class PairFactors:
 
     def _near_field(
         self, x: np.ndarray, nx: np.ndarray, near: np.ndarray, sub: slice
-    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """Exact per-triangle visibility weights for near (receiver, sub-area) pairs.
+    ) -> tuple[np.ndarray, ...]:
+        """Exact per-triangle visibility weights for near (receiver, sub-area) pairs, and
+        the clusters of the sub-areas' trees taken whole.
+
+        Each near pair walks its sub-area's cluster tree (:mod:`raytrad.core.clusters`):
+        a cluster farther than :data:`NEAR_FACTOR` of its sizes is one sample, as a far
+        sub-area is; a leaf's triangles are taken one by one.
 
         Returns
         -------
@@ -390,19 +407,32 @@ class PairFactors:
         shares : (K, 3) float64, each corner's share of what the receiver sees of the
             triangle (:func:`~raytrad.core.kernels.linear_corner_shares` within
             :data:`SHARE_SIZES` triangle sizes, else
-            :func:`~raytrad.core.gather.corner_form_factors`)
+            :func:`~raytrad.core.spread.corner_form_factors`)
+        cluster_receiver, cluster : (H,) int64
+            The clusters taken whole that face the receiver, and its chunk index.
+        cluster_target : (H, 3) float64, their sample points, lifted [m]
+        cluster_weight : (H,) float64, their disk factors (> 0 only)
         """
         fast = compiled.get()
         if fast is None:
             return self._numpy_near_field(x, nx, near, sub)
         bary3, centroids3 = _sub_triangles(3)
         bary2, centroids2 = _sub_triangles(2)
+        tree = self._tree
         return tuple(
             fast.near_triangles(
                 np.ascontiguousarray(near, dtype=np.bool_),
                 sub.start,
-                self._sub_ptr,
-                self._sub_tri,
+                tree.root,
+                tree.sub_tri,
+                tree.start,
+                tree.stop,
+                tree.left,
+                tree.right,
+                tree.point,
+                tree.normal,
+                tree.area,
+                self._node_near,
                 self._tri_corners,
                 self.mesh.triangle_normal,
                 np.ascontiguousarray(x, dtype=np.float64),
@@ -422,20 +452,24 @@ class PairFactors:
 
     def _numpy_near_field(
         self, x: np.ndarray, nx: np.ndarray, near: np.ndarray, sub: slice
-    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    ) -> tuple[np.ndarray, ...]:
         """The numpy reference of :meth:`_near_field` (the compiled path does the same in
-        one loop, :func:`~raytrad.core._compiled_kernels.near_triangles`)."""
+        one loop, :func:`~raytrad.core._compiled_near.near_triangles`)."""
         c, s = np.nonzero(near)
-        if len(c) == 0:
-            empty = np.zeros(0, np.int64)
-            return empty, empty, np.zeros((0, 3)), np.zeros(0), np.zeros((0, 3))
-        s_global = s + sub.start
-        start, stop = self._sub_ptr[s_global], self._sub_ptr[s_global + 1]
-        counts = stop - start
-        pair = np.repeat(np.arange(len(c)), counts)
-        offset = np.arange(len(pair)) - np.repeat(np.cumsum(counts) - counts, counts)
-        tri = self._sub_tri[np.repeat(start, counts) + offset]
-        cc = c[pair]
+        tree = self._tree
+        element, item = tree.cuts(tree.root[s + sub.start], x[c], NEAR_FACTOR)
+        whole = item >= 0
+        node_c, node = c[element[whole]], item[whole]
+        node_w = disk_factors(
+            x[node_c], nx[node_c], tree.point[node], tree.normal[node], tree.area[node]
+        )
+        facing = node_w > 0
+        node_c, node, node_w = node_c[facing], node[facing], node_w[facing]
+        node_target = self._node_target[node]
+        leaf = -1 - item[~whole]
+        owner, slot = runs(tree.start[leaf], tree.stop[leaf])
+        tri = tree.sub_tri[slot]
+        cc = c[element[~whole][owner]]
         f = self._triangle_factors(x[cc], nx[cc], tri)
         keep = f > 0
         cc, tri = cc[keep], tri[keep]
@@ -459,7 +493,7 @@ class PairFactors:
                 shares[part] = linear_corner_shares(
                     corners[part], x[cc[part]], nx[cc[part]], levels
                 )
-        return cc, tri, target, f[keep], shares
+        return cc, tri, target, f[keep], shares, node_c, node, node_target, node_w
 
 
 def visible_factors(

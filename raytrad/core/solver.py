@@ -430,8 +430,8 @@ def _shoot(
         problem.entry_patch,
         state.patch_radiosity,
         problem.scratch,
-        problem.patch_subareas[patch],
-        problem.patch_subareas[patch + 1],
+        problem.patch_nodes[patch],
+        problem.patch_nodes[patch + 1],
         means.pointer,
         means.receivers,
         means.shares,
@@ -474,12 +474,12 @@ def numpy_shoot(
     if len(gather.receivers):
         problem.scratch[sources] = shots
         means = problem.subarea_means
-        subareas = np.arange(problem.patch_subareas[patch], problem.patch_subareas[patch + 1])
-        problem.scratch[means.base + subareas] = means.of(subareas, problem.scratch)
+        nodes = np.arange(problem.patch_nodes[patch], problem.patch_nodes[patch + 1])
+        problem.scratch[means.base + nodes] = means.of(nodes, problem.scratch)
         near = np.searchsorted(j, gather.receivers)
         irradiance[near] = f[near, None] * gather.gathered(problem.scratch)
         problem.scratch[sources] = 0.0
-        problem.scratch[means.base + subareas] = 0.0
+        problem.scratch[means.base + nodes] = 0.0
         _conserve(irradiance, f, amount, problem.receiver_area[j], near)
     state.irradiance[j] += irradiance
     reflected = problem.receiver_reflectance[j] * irradiance

@@ -34,8 +34,8 @@ class DiscreteSystem:
     patch_entries: np.ndarray  # (nnz,) entries grouped by patch
     patch_ptr: np.ndarray  # (P + 1,) CSR pointers into patch_entries
     subarea_means: SubareaMeans  # the near-field gather's sources beyond the receivers
-    patch_subareas: np.ndarray  # (P + 1,) each patch's sub-areas, CSR pointers
-    scratch: np.ndarray  # (R + SA, 3) zeros, a work array of _shoot
+    patch_nodes: np.ndarray  # (P + 1,) each patch's sub-areas and clusters, CSR pointers
+    scratch: np.ndarray  # (R + N, 3) zeros, a work array of _shoot
 
     @classmethod
     def from_mesh(cls, mesh: RadiosityMesh, means: SubareaMeans | None = None) -> DiscreteSystem:
@@ -54,6 +54,7 @@ class DiscreteSystem:
         ptr = np.searchsorted(r, np.arange(mesh.receiver_count + 1))
         entry_patch = uniq % mesh.patch_count
         by_patch = np.argsort(entry_patch, kind="stable")
+        means = subarea_means(mesh) if means is None else means
         return cls(
             patch_area=mesh.patch_area,
             patch_reflectance=mesh.patch_reflectance,
@@ -66,9 +67,9 @@ class DiscreteSystem:
             entry_receiver=r,
             patch_entries=by_patch,
             patch_ptr=np.searchsorted(entry_patch[by_patch], np.arange(mesh.patch_count + 1)),
-            subarea_means=subarea_means(mesh) if means is None else means,
-            patch_subareas=np.searchsorted(mesh.subarea_patch, np.arange(mesh.patch_count + 1)),
-            scratch=np.zeros((mesh.receiver_count + mesh.subarea_count, 3)),
+            subarea_means=means,
+            patch_nodes=means.patch_ptr,
+            scratch=np.zeros((mesh.receiver_count + len(means.pointer) - 1, 3)),
         )
 
     def spread(

@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import itertools
 from collections.abc import Callable
-from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -19,21 +18,15 @@ import pytest
 from raytrad.core import compiled
 from raytrad.core.formfactor import receiver_points
 from raytrad.core.gather import (
-    GatherShares,
     GatherWeights,
-    corner_form_factors,
-    numpy_subarea_spread,
     numpy_sum_shares,
-    subarea_means,
-    subarea_spread,
     sum_shares,
 )
 from raytrad.core.kernels import linear_corner_shares, numpy_polygon_form_factor
-from raytrad.core.mesh import RadiosityMesh
 from raytrad.core.pipeline import Prepared
 from raytrad.core.solver import SolveResult, SolveSettings, solve
+from raytrad.core.spread import corner_form_factors
 from raytrad.products.probe import hemisphere_gather
-from raytrad.scene import Scene
 
 LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
 
@@ -194,103 +187,3 @@ def test_gathered_sums_each_near_receivers_shares(compact: bool) -> None:
     )
     np.testing.assert_allclose(gather.numpy_gathered(radiosity), want, rtol=1e-14, atol=0)
     np.testing.assert_array_equal(gather.gathered(radiosity), gather.numpy_gathered(radiosity))
-
-
-@pytest.mark.skipif(compiled.get() is None, reason="numba is not installed")
-def test_compiled_subarea_spread_matches_numpy(cornell_mesh: tuple[Scene, RadiosityMesh]) -> None:
-    # Receivers a few centimetres off the Cornell box's surfaces, each with elements on
-    # sub-areas near it (spread by midpoint weights) and far from it (spread by area).
-    _, mesh = cornell_mesh
-    order = np.lexsort((np.arange(len(mesh.triangle_subarea)), mesh.triangle_subarea))
-    sub_ptr = np.searchsorted(mesh.triangle_subarea[order], np.arange(mesh.subarea_count + 1))
-    shares = GatherShares(mesh, order, sub_ptr)
-    rng = np.random.default_rng(5)
-    pairs = 200
-    home = rng.integers(0, mesh.subarea_count, pairs)
-    points = mesh.subarea_point[home] + 0.03 * mesh.subarea_normal[home]
-    normals = -mesh.subarea_normal[home]  # looking back at the surface, 3 cm away
-    near = np.argsort(np.linalg.norm(mesh.subarea_point[None] - points[:, None], axis=2), axis=1)
-    subareas = np.concatenate(
-        [near[:, 1:20].reshape(-1), rng.integers(0, mesh.subarea_count, 3000)]
-    )
-    sub_pair = np.concatenate([np.repeat(np.arange(pairs), 19), rng.integers(0, pairs, 3000)])
-    sub_weight = rng.random(len(subareas))
-    arrays = (
-        sub_pair,
-        subareas,
-        sub_weight,
-        shares.sub_ptr,
-        shares.sub_tri,
-        shares.tri_share,
-        shares.corner_share,
-        shares.corners,
-        shares.tri_corners,
-        shares.tri_normal,
-        points,
-        normals,
-        shares.sub_point,
-        shares.sub_reach,
-        shares.means.pointer,
-        shares.means.base,
-    )
-    fast, slow = subarea_spread(*arrays), numpy_subarea_spread(*arrays)
-    reach = np.linalg.norm(points[sub_pair] - mesh.subarea_point[subareas], axis=1)
-    near_elements = reach <= shares.sub_reach[subareas]
-    assert 100 < near_elements.sum() < len(subareas) - 100  # both kinds are exercised
-    stride = mesh.receiver_count + mesh.subarea_count
-    totals = []
-    for pair, source, weight in (fast, slow):
-        totals.append(np.bincount(pair * stride + source, weights=weight, minlength=pairs * stride))
-    np.testing.assert_allclose(totals[0], totals[1], rtol=1e-12, atol=1e-15 * totals[1].max())
-    # independently: a far element hands on its sampled weight; a near one what the
-    # receiver sees of its visible triangles (or, seeing none of them, its weight)
-    expected = np.where(np.diff(shares.means.pointer)[subareas] > 0, sub_weight, 0.0)
-    for k in np.flatnonzero(near_elements):
-        tris = shares.sub_tri[shares.sub_ptr[subareas[k]] : shares.sub_ptr[subareas[k] + 1]]
-        tris = tris[shares.corner_share[tris].sum(axis=1) > 0]
-        p = sub_pair[k]
-        seen = corner_form_factors(
-            shares.tri_corners[tris],
-            shares.tri_normal[tris],
-            np.repeat(points[p : p + 1], len(tris), axis=0),
-            np.repeat(normals[p : p + 1], len(tris), axis=0),
-        ).sum()
-        expected[k] = seen if seen > 0 else expected[k]
-    assert (expected[near_elements] != sub_weight[near_elements]).mean() > 0.5
-    np.testing.assert_allclose(fast[2].sum(), expected.sum(), rtol=1e-12)
-    # a far element is one weight on its sub-area's mean, however many receivers it has
-    base = mesh.receiver_count
-    for _, source, weight in (fast, slow):
-        on_means = source >= base
-        handed = ~near_elements & (np.diff(shares.means.pointer)[subareas] > 0)
-        assert on_means.sum() == handed.sum() > 1000
-        np.testing.assert_array_equal(np.sort(source[on_means] - base), np.sort(subareas[handed]))
-        np.testing.assert_allclose(weight[on_means].sum(), sub_weight[handed].sum(), rtol=1e-12)
-
-
-def test_subarea_means_are_area_weighted_over_visible_corners(
-    cornell_mesh: tuple[Scene, RadiosityMesh],
-) -> None:
-    """Each sub-area's mean, against a loop over its triangles: area x the mean of the
-    visible corners, over the area of triangles with any (hidden receivers count for
-    nothing)."""
-    _, mesh = cornell_mesh
-    rng = np.random.default_rng(13)
-    visible = rng.random(mesh.receiver_count) > 0.1
-    mesh = replace(mesh, receiver_visible=visible)
-    radiosity = rng.random((mesh.receiver_count, 3))
-    means = subarea_means(mesh)
-    extended = means.extend(radiosity)
-    assert extended.shape == (mesh.receiver_count + mesh.subarea_count, 3)
-    with pytest.raises(ValueError, match="receivers for a mesh of"):
-        means.extend(radiosity[:-1])  # another mesh's radiosity: refused, not misplaced
-    np.testing.assert_array_equal(extended[: mesh.receiver_count], radiosity)
-    for s in rng.choice(mesh.subarea_count, 60, replace=False):
-        total, area = np.zeros(3), 0.0
-        for t in np.flatnonzero(mesh.triangle_subarea == s):
-            seen = [k for k in mesh.triangle_receivers[t] if visible[k]]
-            if seen:
-                total += mesh.triangle_area[t] * radiosity[seen].mean(axis=0)
-                area += mesh.triangle_area[t]
-        want = total / area if area > 0 else np.zeros(3)
-        np.testing.assert_allclose(extended[mesh.receiver_count + s], want, rtol=1e-12)

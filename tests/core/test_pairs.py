@@ -156,3 +156,37 @@ def test_compiled_near_field_matches_numpy(cornell: Prepared) -> None:
         seen["split"] += int((distance < 1.0).sum())
         seen["items"] += len(want[0])
     assert min(seen.values()) > 50, seen
+
+
+@pytest.mark.skipif(compiled.get() is None, reason="needs the compiled kernels")
+def test_compiled_near_field_matches_numpy_through_cluster_trees() -> None:
+    """The near field's walk through split sub-areas (a coarse patching, one sub-area a
+    patch): clusters taken whole (disk factor, lifted sample point) and the leaves'
+    triangles, against the numpy path, item by item and in the same order."""
+    from raytrad.scene.builtin import cornell_box
+
+    mesh = build_mesh(cornell_box(), MeshSettings(receivers=2000, patches=25, samples=1))
+    pairs = PairFactors(mesh, None, float(np.linalg.norm(np.ptp(mesh.positions, axis=0))))
+    assert pairs._tree.count > 3 * mesh.subarea_count
+    rng = np.random.default_rng(8)
+    probes, probe_normals = _probes(mesh, rng, 300)
+    clusters = triangles = 0
+    for patch in range(mesh.patch_count):
+        sub = mesh.patch_subareas(patch)
+        lifted = mesh.receiver_position[::7] + 1e-3 * mesh.receiver_normal[::7]
+        x = np.concatenate([lifted, probes])
+        n = np.concatenate([mesh.receiver_normal[::7], probe_normals])
+        near = np.ones((len(x), sub.stop - sub.start), dtype=bool)
+        got = pairs._near_field(x, n, near, sub)
+        want = pairs._numpy_near_field(x, n, near, sub)
+        for k in (0, 1, 5, 6):  # receivers, triangles, cluster receivers, clusters
+            np.testing.assert_array_equal(got[k], want[k])
+        for k in (2, 3, 4, 7, 8):
+            np.testing.assert_allclose(got[k], want[k], rtol=1e-12, atol=1e-12)
+        clusters += len(want[6])
+        triangles += len(want[1])
+        # a cluster taken whole lies beyond NEAR_FACTOR of its sizes from the receiver
+        tree = pairs._tree
+        d = np.linalg.norm(x[want[5]] - tree.point[want[6]], axis=1)
+        assert np.all(d > pairs_module.NEAR_FACTOR * tree.size[want[6]])
+    assert clusters > 1000 and triangles > 1000, (clusters, triangles)

@@ -1,0 +1,367 @@
+"""The near field's loops behind :mod:`raytrad.core.compiled`, written for numba (imported
+only there): the walk through a sub-area's cluster tree, a near (receiver, sub-area)
+pair's elements, and the spread of a node's weight over receivers and means.
+
+Plain Python as written here, compiled like :mod:`raytrad.core._compiled_kernels`, whose
+compiled helpers these call through the module (bound compiled by the time these run).
+Each computes the same formula, in the same order, as its numpy reference:
+:meth:`raytrad.core.pairs.PairFactors._numpy_near_field`,
+:func:`raytrad.core.spread.numpy_subarea_spread`, :func:`raytrad.core.clusters.numpy_cuts`.
+"""
+
+# mypy: ignore-errors
+
+import math
+
+import numpy as np
+
+from raytrad.core import _compiled_kernels as _k
+
+#: Every function to compile, each after the helpers it calls.
+KERNELS = (
+    "_triangle_corner_weights",
+    "_cut",
+    "_disk",
+    "_buffers",
+    "_triangle",
+    "subarea_spread",
+    "near_triangles",
+)
+
+#: Depth of the walk's stack: two entries a level (a million levels' worth of halving).
+STACK = 256
+
+
+def _triangle_corner_weights(corners, normal, x, nx, rule, rule_weight, out):
+    """Corner form factors of one triangle seen from (x, nx) into ``out`` (3,)
+    (:func:`raytrad.core.spread.corner_form_factors`; ``rule`` and ``rule_weight`` its
+    points and weights)."""
+    for v in range(3):
+        out[v] = 0.0
+    for q in range(len(rule_weight)):
+        b0, b1, b2 = rule[q, 0], rule[q, 1], rule[q, 2]
+        dx = b0 * corners[0, 0] + b1 * corners[1, 0] + b2 * corners[2, 0] - x[0]
+        dy = b0 * corners[0, 1] + b1 * corners[1, 1] + b2 * corners[2, 1] - x[1]
+        dz = b0 * corners[0, 2] + b1 * corners[1, 2] + b2 * corners[2, 2] - x[2]
+        r2 = dx * dx + dy * dy + dz * dz
+        cos_r = max(dx * nx[0] + dy * nx[1] + dz * nx[2], 0.0)
+        cos_s = max(-(dx * normal[0] + dy * normal[1] + dz * normal[2]), 0.0)
+        kernel = cos_r * cos_s / (r2 * r2) if r2 > 0.0 else 0.0
+        for v in range(3):
+            out[v] += kernel * rule_weight[q] * rule[q, v]
+    ux = corners[1, 0] - corners[0, 0]
+    uy = corners[1, 1] - corners[0, 1]
+    uz = corners[1, 2] - corners[0, 2]
+    vx = corners[2, 0] - corners[0, 0]
+    vy = corners[2, 1] - corners[0, 1]
+    vz = corners[2, 2] - corners[0, 2]
+    cx, cy, cz = uy * vz - uz * vy, uz * vx - ux * vz, ux * vy - uy * vx
+    area = 0.5 * math.sqrt(cx * cx + cy * cy + cz * cz)
+    for v in range(3):
+        out[v] *= area / (12.0 * math.pi)
+
+
+def _cut(first, x, threshold, left, right, point, stack, cut):
+    """The items below node ``first`` seen from ``x`` into ``cut``, in the order of their
+    slots; returns their count (see :func:`raytrad.core.clusters.numpy_cuts`): a node
+    with halves farther than ``threshold`` is taken whole (``>= 0``), a leaf as its
+    triangles (``-1 - leaf``); ``first`` itself is never taken whole."""
+    stack[0] = first
+    top = 1
+    m = 0
+    while top > 0:
+        top -= 1
+        n = stack[top]
+        if left[n] < 0:
+            cut[m] = -1 - n
+            m += 1
+            continue
+        if n != first:
+            dx, dy, dz = x[0] - point[n, 0], x[1] - point[n, 1], x[2] - point[n, 2]
+            if math.sqrt(dx * dx + dy * dy + dz * dz) > threshold[n]:
+                cut[m] = n
+                m += 1
+                continue
+        stack[top] = right[n]  # the left half on top: slots in order
+        stack[top + 1] = left[n]
+        top += 2
+    return m
+
+
+def _disk(x, nx, point, normal, area):
+    """The disk-approximation factor of a node (``point``, unit ``normal``, ``area``)
+    seen from (``x``, ``nx``), 0 where either faces away (see
+    :func:`raytrad.core.clusters.disk_factors`)."""
+    dx, dy, dz = point[0] - x[0], point[1] - x[1], point[2] - x[2]
+    r2 = dx * dx + dy * dy + dz * dz
+    r = math.sqrt(r2)
+    inv_r = 1.0 / (r if r > 0.0 else 1.0)
+    cos_r = (dx * nx[0] + dy * nx[1] + dz * nx[2]) * inv_r
+    cos_s = -(dx * normal[0] + dy * normal[1] + dz * normal[2]) * inv_r
+    if cos_r > 0.0 and cos_s > 0.0:
+        return cos_r * cos_s * area / (math.pi * r2 + area)
+    return 0.0
+
+
+def _buffers(nodes, start, stop):
+    """The walk's stack and a cut buffer long enough for any of ``nodes``' subtrees."""
+    longest = 1
+    for a in range(len(nodes)):
+        longest = max(longest, 2 * (stop[nodes[a]] - start[nodes[a]]) + 1)
+    return np.empty(STACK, dtype=np.int64), np.empty(longest, dtype=np.int64)
+
+
+def subarea_spread(
+    sub_pair,
+    nodes,
+    sub_weight,
+    points,
+    normals,
+    sub_tri,
+    start,
+    stop,
+    left,
+    right,
+    node_point,
+    node_normal,
+    node_area,
+    node_reach,
+    node_visible,
+    visible_area,
+    corner_share,
+    corners,
+    tri_corners,
+    tri_normal,
+    mean_ptr,
+    base,
+    rule,
+    rule_weight,
+):
+    """Node elements' weights on receivers and means (see
+    :func:`raytrad.core.spread.numpy_subarea_spread`; handed elements first, then the
+    near ones, each in element order, its items in the order of their slots)."""
+    n = len(nodes)
+    far = np.empty(n, dtype=np.bool_)
+    stack, cut = _buffers(nodes, start, stop)
+    count = 0
+    for a in range(n):
+        s, p = nodes[a], sub_pair[a]
+        dx = points[p, 0] - node_point[s, 0]
+        dy = points[p, 1] - node_point[s, 1]
+        dz = points[p, 2] - node_point[s, 2]
+        far[a] = math.sqrt(dx * dx + dy * dy + dz * dz) > node_reach[s]
+        if far[a]:
+            count += 1 if mean_ptr[s + 1] > mean_ptr[s] else 0
+            continue
+        m = _cut(s, points[p], node_reach, left, right, node_point, stack, cut)
+        for q in range(m):
+            item = cut[q]
+            if item >= 0:
+                count += 1 if mean_ptr[item + 1] > mean_ptr[item] else 0
+            else:
+                count += 3 * (stop[-1 - item] - start[-1 - item])
+    out_pair = np.empty(count, dtype=np.int64)
+    out_source = np.empty(count, dtype=np.int64)
+    out_weight = np.empty(count)
+    out_area = np.empty(count)  # each entry's visible area: its weight when nothing is seen
+    i = 0
+    for a in range(n):
+        s = nodes[a]
+        if far[a] and mean_ptr[s + 1] > mean_ptr[s]:  # the node's mean
+            out_pair[i] = sub_pair[a]
+            out_source[i] = base + s
+            out_weight[i] = sub_weight[a]
+            i += 1
+    raw = np.empty(3)
+    for a in range(n):
+        if far[a]:
+            continue
+        s, p = nodes[a], sub_pair[a]
+        x, nx = points[p], normals[p]
+        first = i
+        total = 0.0
+        m = _cut(s, x, node_reach, left, right, node_point, stack, cut)
+        for q in range(m):
+            item = cut[q]
+            if item >= 0:
+                if mean_ptr[item + 1] > mean_ptr[item]:
+                    w = _disk(x, nx, node_point[item], node_normal[item], node_area[item])
+                    out_pair[i], out_source[i], out_weight[i] = p, base + item, w
+                    out_area[i] = node_visible[item]
+                    total += w
+                    i += 1
+                continue
+            leaf = -1 - item
+            for slot in range(start[leaf], stop[leaf]):
+                t = sub_tri[slot]
+                _triangle_corner_weights(
+                    tri_corners[t], tri_normal[t], x, nx, rule, rule_weight, raw
+                )
+                seen = 0.0
+                for v in range(3):
+                    if corner_share[t, v] > 0.0:
+                        seen += raw[v]
+                scale = (raw[0] + raw[1] + raw[2]) / seen if seen > 0.0 else 0.0
+                for v in range(3):
+                    w = raw[v] * scale if corner_share[t, v] > 0.0 else 0.0
+                    out_pair[i], out_source[i], out_weight[i] = p, corners[t, v], w
+                    out_area[i] = visible_area[t] * corner_share[t, v]
+                    total += w
+                    i += 1
+        if not total > 0.0:  # seeing none of it: the sampled weight by visible area
+            scale = sub_weight[a] / node_visible[s] if node_visible[s] > 0.0 else 0.0
+            for j in range(first, i):
+                out_weight[j] = scale * out_area[j]
+    return out_pair, out_source, out_weight
+
+
+def _triangle(tri, m, x, n, limits, rules, scratch, target, shares, factor, k):
+    """One near triangle of :func:`near_triangles` into ``target``, ``shares`` and
+    ``factor[k]``; False where it does not face the receiver or gives no factor.
+    ``limits`` is (band, horizon, lift, share_sizes), ``rules`` the subdivisions' and the
+    corner rule's points and weights, ``scratch`` two work arrays."""
+    band, horizon, lift, share_sizes = limits
+    bary3, centroids3, bary2, centroids2, rule, rule_weight = rules
+    part, work = scratch
+    front = (x[0] - tri[0, 0]) * m[0] + (x[1] - tri[0, 1]) * m[1] + (x[2] - tri[0, 2]) * m[2]
+    if not front > band:
+        return False
+    f = _k.clipped_factor(tri, x, n, work)
+    if not f > 0.0:
+        return False
+    factor[k] = f
+    _k._visible_centroid(tri, x, n, horizon, target)
+    for d in range(3):
+        target[d] += lift * m[d]
+    longest = 0.0
+    for e in range(3):
+        p = (e + 2) % 3
+        ex, ey, ez = tri[e, 0] - tri[p, 0], tri[e, 1] - tri[p, 1], tri[e, 2] - tri[p, 2]
+        longest = max(longest, math.sqrt(ex * ex + ey * ey + ez * ez))
+    mx = (tri[0, 0] + tri[1, 0] + tri[2, 0]) / 3.0 - x[0]
+    my = (tri[0, 1] + tri[1, 1] + tri[2, 1]) / 3.0 - x[1]
+    mz = (tri[0, 2] + tri[1, 2] + tri[2, 2]) / 3.0 - x[2]
+    distance = math.sqrt(mx * mx + my * my + mz * mz) / longest
+    if distance >= share_sizes:
+        _triangle_corner_weights(tri, m, x, n, rule, rule_weight, shares)
+        total = shares[0] + shares[1] + shares[2]
+        for v in range(3):
+            shares[v] = shares[v] / total if total > 0.0 else 1.0 / 3.0
+    elif distance < 1.0:
+        _k._linear_shares(tri, x, n, bary3, centroids3, part, work, shares)
+    else:
+        _k._linear_shares(tri, x, n, bary2, centroids2, part, work, shares)
+    return True
+
+
+def near_triangles(
+    near,
+    sub_start,
+    root,
+    sub_tri,
+    start,
+    stop,
+    left,
+    right,
+    node_point,
+    node_normal,
+    node_area,
+    node_near,
+    tri_corners,
+    tri_normal,
+    points,
+    normals,
+    band,
+    horizon,
+    lift,
+    share_sizes,
+    bary3,
+    centroids3,
+    bary2,
+    centroids2,
+    rule,
+    rule_weight,
+):
+    """The near field of a chunk in one pass (see
+    :meth:`raytrad.core.pairs.PairFactors._near_field`, whose numpy path is the reference):
+    per near (receiver, sub-area) pair in row-major order, the items of its cut
+    (:func:`_cut` at ``node_near``) in the order of their slots: a cluster taken whole
+    facing the receiver, with its disk factor and ray target (its point, lifted); each
+    triangle of a leaf facing the receiver by more than ``band`` with an exact factor
+    above 0: the receiver, the triangle, the ray target, the factor and the corner shares,
+    by :func:`linear_corner_shares` within ``share_sizes`` triangle sizes and beyond by
+    the corner form factors (:func:`_triangle_corner_weights`, 1/3 each where they are
+    0)."""
+    stack, cut = _buffers(root, start, stop)
+    size = 0
+    whole = 0
+    for c in range(near.shape[0]):
+        for s in range(near.shape[1]):
+            if near[c, s]:
+                m = _cut(
+                    root[s + sub_start], points[c], node_near, left, right, node_point, stack, cut
+                )
+                for q in range(m):
+                    if cut[q] >= 0:
+                        whole += 1
+                    else:
+                        size += stop[-1 - cut[q]] - start[-1 - cut[q]]
+    out_c = np.empty(size, dtype=np.int64)
+    out_tri = np.empty(size, dtype=np.int64)
+    target = np.empty((size, 3))
+    factor = np.empty(size)
+    shares = np.empty((size, 3))
+    node_c = np.empty(whole, dtype=np.int64)
+    node_id = np.empty(whole, dtype=np.int64)
+    node_target = np.empty((whole, 3))
+    node_w = np.empty(whole)
+    limits = (band, horizon, lift, share_sizes)
+    rules = (bary3, centroids3, bary2, centroids2, rule, rule_weight)
+    scratch = (np.empty((3, 3)), np.empty((4, 3)))
+    k = 0
+    h = 0
+    for c in range(near.shape[0]):
+        x, n = points[c], normals[c]
+        for s in range(near.shape[1]):
+            if not near[c, s]:
+                continue
+            m = _cut(root[s + sub_start], x, node_near, left, right, node_point, stack, cut)
+            for q in range(m):
+                item = cut[q]
+                if item >= 0:
+                    w = _disk(x, n, node_point[item], node_normal[item], node_area[item])
+                    if w > 0.0:
+                        node_c[h], node_id[h], node_w[h] = c, item, w
+                        for d in range(3):
+                            node_target[h, d] = node_point[item, d] + lift * node_normal[item, d]
+                        h += 1
+                    continue
+                leaf = -1 - item
+                for slot in range(start[leaf], stop[leaf]):
+                    t = sub_tri[slot]
+                    if _triangle(
+                        tri_corners[t],
+                        tri_normal[t],
+                        x,
+                        n,
+                        limits,
+                        rules,
+                        scratch,
+                        target[k],
+                        shares[k],
+                        factor,
+                        k,
+                    ):
+                        out_c[k], out_tri[k] = c, t
+                        k += 1
+    return (
+        out_c[:k],
+        out_tri[:k],
+        target[:k],
+        factor[:k],
+        shares[:k],
+        node_c[:h],
+        node_id[:h],
+        node_target[:h],
+        node_w[:h],
+    )

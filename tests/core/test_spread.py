@@ -1,0 +1,128 @@
+"""Where a near receiver's weight of a sub-area or cluster lies (raytrad.core.spread):
+the compiled spread against its numpy reference, and the clusters' spread against the
+triangle-by-triangle one it replaces, on a radiosity linear across the surfaces."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from raytrad.core import clusters, compiled
+from raytrad.core.gather import subarea_triangles
+from raytrad.core.mesh import MeshSettings, RadiosityMesh, build_mesh
+from raytrad.core.spread import (
+    GatherShares,
+    corner_form_factors,
+    numpy_subarea_spread,
+    subarea_spread,
+)
+from raytrad.scene.builder import quads_scene
+from raytrad.scene.builtin import cornell_box
+from tests.conftest import CORNELL_MESH
+
+#: One sub-area a patch (two for the light) of a coarse patching: sub-areas of 40-200
+#: triangles, split three to five times.
+CLUSTERED = replace(CORNELL_MESH, patches=25, samples=1, emitter_samples=2)
+
+
+@pytest.fixture(scope="module")
+def mesh() -> RadiosityMesh:
+    return build_mesh(cornell_box(), CLUSTERED)
+
+
+def _elements(mesh: RadiosityMesh, shares: GatherShares, seed: int) -> tuple[np.ndarray, ...]:
+    """Receivers 3-20 cm off the Cornell box's surfaces, looking back at them, each with
+    elements on the sub-areas near it and on random ones."""
+    rng = np.random.default_rng(seed)
+    pairs = 200
+    home = rng.integers(0, mesh.subarea_count, pairs)
+    lift = rng.choice([0.03, 0.1, 0.2], pairs)[:, None]
+    points = mesh.subarea_point[home] + lift * mesh.subarea_normal[home]
+    normals = -mesh.subarea_normal[home]
+    near = np.argsort(np.linalg.norm(mesh.subarea_point[None] - points[:, None], axis=2), axis=1)
+    subareas = np.concatenate([near[:, 1:8].reshape(-1), rng.integers(0, mesh.subarea_count, 600)])
+    sub_pair = np.concatenate([np.repeat(np.arange(pairs), 7), rng.integers(0, pairs, 600)])
+    nodes = shares.tree.root[subareas]
+    return sub_pair, nodes, rng.random(len(nodes)), points, normals
+
+
+@pytest.mark.skipif(compiled.get() is None, reason="numba is not installed")
+def test_compiled_subarea_spread_matches_numpy(mesh: RadiosityMesh) -> None:
+    """On the coarse patching (clusters taken whole) and on a finer one (sub-areas far
+    enough to hand their weight on whole)."""
+    kinds = np.zeros(3, int)
+    finer = build_mesh(cornell_box(), replace(CORNELL_MESH, samples=2, emitter_samples=4))
+    for each in (mesh, finer):
+        shares = GatherShares(each, *subarea_triangles(each))
+        sub_pair, nodes, weight, points, normals = _elements(each, shares, 5)
+        fast = subarea_spread(sub_pair, nodes, weight, points, normals, shares)
+        slow = numpy_subarea_spread(sub_pair, nodes, weight, points, normals, shares)
+        base = each.receiver_count
+        stride = base + shares.tree.count
+        totals = [
+            np.bincount(p * stride + s, weights=w, minlength=200 * stride)
+            for p, s, w in (fast, slow)
+        ]
+        np.testing.assert_allclose(totals[0], totals[1], rtol=1e-12, atol=1e-15 * totals[1].max())
+        # the three kinds of entries: nodes handed on whole, clusters, triangles' corners
+        handed = np.isin(slow[1] - base, nodes)
+        kinds += [handed.sum(), ((slow[1] >= base) & ~handed).sum(), (slow[1] < base).sum()]
+    assert kinds.min() > 20, kinds
+
+
+def test_clusters_spread_a_linear_radiosity_as_the_triangles_do(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """What receivers above a large floor (one sub-area of 32 000 triangles) gather of
+    it through its clusters (a far cluster's weight on its mean) against the
+    triangle-by-triangle spread the trees replace (every triangle's corners, as when no
+    sub-area is split), for a radiosity linear in position: they differ by second-order
+    terms of the clusters' sizes over their distance, with a hundredth of the entries."""
+    floor = quads_scene([[(0, 0, 0), (4, 0, 0), (4, 0, 4), (0, 0, 4)]], facing=[(0, 1, 0)])
+    settings = MeshSettings(receivers=16000, patches=1, samples=1, emitter_samples=1)
+    mesh = build_mesh(floor, settings)
+    tree_shares = GatherShares(mesh, *subarea_triangles(mesh))
+    monkeypatch.setattr(clusters, "CLUSTER_TRIANGLES", 1 << 30)
+    flat_shares = GatherShares(mesh, *subarea_triangles(mesh))
+    assert flat_shares.tree.count == 1 < tree_shares.tree.count
+    rng = np.random.default_rng(9)
+    count = 60
+    points = np.column_stack(
+        [rng.uniform(-1, 5, count), rng.uniform(0.05, 2.0, count), rng.uniform(-1, 5, count)]
+    )
+    normals = np.tile([0.0, -1.0, 0.0], (count, 1))
+    radiosity = 1.0 + mesh.receiver_position @ np.array([0.3, 0.0, -0.2])
+    gathered, entries = [], []
+    for shares in (tree_shares, flat_shares):
+        pair, source, w = numpy_subarea_spread(
+            np.arange(count),
+            shares.tree.root[np.zeros(count, int)],
+            np.ones(count),
+            points,
+            normals,
+            shares,
+        )
+        values = shares.means.extend(np.repeat(radiosity[:, None], 3, axis=1))[:, 0]
+        total = np.bincount(pair, weights=w, minlength=count)
+        gathered.append(np.bincount(pair, weights=w * values[source], minlength=count) / total)
+        entries.append(len(source))
+    assert entries[0] < entries[1] / 50
+    difference = np.abs(gathered[0] - gathered[1]) / np.ptp(radiosity)
+    assert difference.max() < 0.015 and difference.mean() < 0.003, difference
+    # while the floor's mean, all a receiver would get without the near field, is off by
+    # tens of times as much
+    mean = shares.means.extend(np.repeat(radiosity[:, None], 3, axis=1))[-1, 0]
+    assert np.abs(mean - gathered[1]).mean() / np.ptp(radiosity) > 20 * difference.mean()
+
+
+def test_corner_form_factors_sum_to_the_triangle_factor() -> None:
+    """The rule's nine points against Lambert's exact factor of a triangle four of its
+    sizes away (the spread's weights are form factors, as a cluster's disk factor is)."""
+    triangle = np.array([[[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]])
+    up = np.array([[0.0, 0.0, 1.0]])
+    point = np.array([[0.3, 0.3, 4.0]])
+    weights = corner_form_factors(triangle, up, point, -up)[0]
+    exact = 0.5 / (np.pi * 16.0)  # area cos cos / (pi r^2), to 1/r^2 corrections
+    assert abs(weights.sum() / exact - 1.0) < 0.02
