@@ -254,7 +254,7 @@ def render(
         state, columns = resume_point(checkpoint, key, strict) if resume else (None, None)
 
         def save(state: SolverState, engine: Any = None) -> None:  # with a pass's columns
-            save_state(checkpoint, state, key, (engine or prepared.engine).pass_columns())
+            save_state(checkpoint, state, key, (engine or prepared.engine).pass_column_parts())
 
         on_column = pass_hook(save, settings.checkpoint_seconds)  # a long pass is saved too
         prepared = prepare(loaded.scene, settings, budget, columns, on_column)

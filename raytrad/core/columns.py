@@ -143,28 +143,53 @@ class ColumnSpill:
         self._paths.clear()
 
 
-def pack_columns(patches: list[int], columns: list[Column]) -> dict[str, np.ndarray]:
-    """Columns as flat arrays for a checkpoint (:func:`unpack_columns` reads them back)."""
-    gathers = [c.gather for c in columns]
+def column_parts(patch: int, column: Column) -> dict[str, np.ndarray]:
+    """One column as the pieces of :func:`pack_columns`' flat arrays (the same names and
+    dtypes): a pass checkpoint writes them column by column."""
+    gather = column.gather
 
-    def flat(values: list[np.ndarray], dtype: type) -> np.ndarray:
-        return np.concatenate(values) if values else np.zeros(0, dtype)
-
-    def lengths(values: list[np.ndarray]) -> np.ndarray:
-        return np.array([len(v) for v in values], dtype=np.int64)
+    def length(values: np.ndarray) -> np.ndarray:
+        return np.array([len(values)], dtype=np.int64)
 
     return {
-        "patch": np.array(patches, dtype=np.int64),
-        "length": lengths([c.receivers for c in columns]),
-        "receivers": flat([c.receivers for c in columns], np.int64),
-        "factors": flat([c.factors for c in columns], np.float32),
-        "near_length": lengths([g.receivers for g in gathers]),
-        "near_receivers": flat([g.receivers for g in gathers], np.int64),
-        "near_factors": flat([g.factors for g in gathers], np.float64),
-        "near_pointer": flat([g.pointer[1:] for g in gathers], np.int64),
-        "source_length": lengths([g.sources for g in gathers]),
-        "sources": flat([g.sources for g in gathers], np.int64),
-        "weights": flat([g.weights for g in gathers], np.float32),
+        "patch": np.array([patch], dtype=np.int64),
+        "length": length(column.receivers),
+        "receivers": np.asarray(column.receivers),
+        "factors": np.asarray(column.factors, dtype=np.float32),
+        "near_length": length(gather.receivers),
+        "near_receivers": np.asarray(gather.receivers),
+        "near_factors": np.asarray(gather.factors, dtype=np.float64),
+        "near_pointer": np.asarray(gather.pointer[1:]),
+        "source_length": length(gather.sources),
+        "sources": np.asarray(gather.sources),
+        "weights": np.asarray(gather.weights, dtype=np.float32),
+    }
+
+
+#: The dtypes of :func:`pack_columns`' arrays when there is no column (else the columns'
+#: own: int32 indices below 2**31 receivers).
+PACKED_DTYPES = {
+    "patch": np.int64,
+    "length": np.int64,
+    "receivers": np.int64,
+    "factors": np.float32,
+    "near_length": np.int64,
+    "near_receivers": np.int64,
+    "near_factors": np.float64,
+    "near_pointer": np.int64,
+    "source_length": np.int64,
+    "sources": np.int64,
+    "weights": np.float32,
+}
+
+
+def pack_columns(patches: list[int], columns: list[Column]) -> dict[str, np.ndarray]:
+    """Columns as flat arrays for a checkpoint (:func:`unpack_columns` reads them back):
+    each of :func:`column_parts`' pieces concatenated over the columns."""
+    parts = [column_parts(p, c) for p, c in zip(patches, columns, strict=True)]
+    return {
+        name: np.concatenate([part[name] for part in parts]) if parts else np.zeros(0, dtype)
+        for name, dtype in PACKED_DTYPES.items()
     }
 
 

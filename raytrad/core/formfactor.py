@@ -21,7 +21,7 @@ from __future__ import annotations
 import itertools
 import logging
 import threading
-from collections.abc import Callable, Generator, Iterable
+from collections.abc import Callable, Generator, Iterable, Iterator
 from concurrent.futures import ThreadPoolExecutor
 from typing import TypeVar
 
@@ -29,7 +29,13 @@ import numpy as np
 
 from raytrad.constants import scene_diagonal, tol
 from raytrad.core.balance import BALANCE_ITERATIONS, balance_columns, closed_patches
-from raytrad.core.columns import Column, ColumnSpill, pack_columns, unpack_columns
+from raytrad.core.columns import (
+    Column,
+    ColumnSpill,
+    column_parts,
+    pack_columns,
+    unpack_columns,
+)
 from raytrad.core.gather import (
     EMPTY,
     GatherRows,
@@ -231,6 +237,16 @@ class FormFactorEngine:
             return {}
         order = [p for p in self._pass_order() if p in self._cache or p in self._spill]
         return pack_columns(order, [self._raw_column(p) for p in order])
+
+    def pass_column_parts(self) -> Iterator[dict[str, np.ndarray]]:
+        """:meth:`pass_columns` a column at a time (:func:`~raytrad.core.columns.column_parts`),
+        a spilled one read back only while it is handed on: what a checkpoint streams to
+        disk without holding every column at once. Nothing once every column is computed."""
+        if self.complete:
+            return
+        for patch in self._pass_order().tolist():
+            if patch in self._cache or patch in self._spill:
+                yield column_parts(patch, self._raw_column(patch))
 
     def restore_columns(self, packed: dict[str, np.ndarray]) -> int:
         """Cache the columns :meth:`pass_columns` packed (a resumed pass computes only the

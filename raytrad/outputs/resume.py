@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import logging
 import os
+from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
 
@@ -18,7 +19,7 @@ import numpy as np
 
 from raytrad.core.solver import SolverState
 from raytrad.errors import RaytradError
-from raytrad.formats.checkpoint import read_checkpoint, write_checkpoint
+from raytrad.formats.checkpoint import Spool, read_checkpoint, write_checkpoint
 from raytrad.scene import Scene, scene_digests
 
 log = logging.getLogger(__name__)
@@ -47,14 +48,26 @@ def save_state(
     path: str | os.PathLike[str],
     state: SolverState,
     key: dict[str, Any],
-    columns: dict[str, np.ndarray] | None = None,
+    columns: dict[str, np.ndarray] | Iterable[dict[str, np.ndarray]] | None = None,
 ) -> None:
     """Write ``state``, its fingerprint ``key`` and the ``columns`` of a form-factor pass
-    cut short (:meth:`~raytrad.core.formfactor.FormFactorEngine.pass_columns`) to ``path``
-    atomically."""
-    arrays, scalars = state.to_record()
-    arrays |= {PASS + name: values for name, values in (columns or {}).items()}
-    write_checkpoint(path, arrays, {"fingerprint": key, "scalars": scalars})
+    cut short to ``path`` atomically: packed
+    (:meth:`~raytrad.core.formfactor.FormFactorEngine.pass_columns`) or column by column
+    (:meth:`~raytrad.core.formfactor.FormFactorEngine.pass_column_parts`), gathered on
+    disk first (:class:`~raytrad.formats.checkpoint.Spool`) so that no more than a
+    column is held at once."""
+    state_arrays, scalars = state.to_record()
+    arrays: dict[str, Any] = dict(state_arrays)
+    record = {"fingerprint": key, "scalars": scalars}
+    if columns is None or isinstance(columns, dict):
+        arrays |= {PASS + name: values for name, values in (columns or {}).items()}
+        write_checkpoint(path, arrays, record)
+        return
+    with Spool() as spool:
+        for parts in columns:
+            spool.add(parts)
+        arrays |= {PASS + name: values for name, values in spool.arrays().items()}
+        write_checkpoint(path, arrays, record)
 
 
 def resume_point(

@@ -156,11 +156,17 @@ def test_columns_of_a_cut_pass_round_trip(tmp_path: Path) -> None:
     with prepare(cornell_box(), SETTINGS.mesh, stop=lambda: next(polls) >= 4) as cut:
         packed = cut.engine.pass_columns()
         saved = {p: cut.engine._cache[p] for p in packed["patch"].tolist()}
-    assert len(saved) == 5
+        streamed = list(cut.engine.pass_column_parts())
+    assert len(saved) == 5 and len(streamed) == 5
     key = fingerprint(cornell_box(), SETTINGS.system_settings())
     path = tmp_path / "c.npz"
-    save_state(path, _state(2), key, packed)
+    # a column at a time through a spool on disk: the same arrays as packed at once
+    save_state(path, _state(2), key, iter(streamed))
     columns = load_pass_columns(path)
+    assert set(columns) == set(packed)
+    for name, values in packed.items():
+        assert columns[name].dtype == values.dtype, name
+        np.testing.assert_array_equal(columns[name], values)
     state, resumed = resume_point(path, key)
     assert state is None and resumed is not None  # shots through unbalanced factors: redone
     with prepare(cornell_box(), SETTINGS.mesh, stop=lambda: True, columns=columns) as again:
