@@ -25,7 +25,7 @@ from raytrad.scene import Scene, scene_digests
 log = logging.getLogger(__name__)
 
 #: Version of the checkpoint layout; a checkpoint of another layout is refused.
-LAYOUT = 3
+LAYOUT = 4  # 4: gather sources beyond the receivers are cluster-tree nodes
 #: Prefix of the arrays holding the columns of a form-factor pass cut short.
 PASS = "pass_"
 

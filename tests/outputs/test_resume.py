@@ -200,3 +200,13 @@ def test_checkpoints_are_written_every_interval(tmp_path: Path) -> None:
     assert outcome.result.stop_reason == "converged"
     assert len(seen) > 2 and all(seen[1:])  # saved after every shot from the first on
     assert not checkpoint.exists()
+
+
+def test_checkpoint_of_the_layout_before_the_cluster_trees_is_refused(tmp_path: Path) -> None:
+    """Layout 3 named sub-areas where layout 4 names cluster-tree nodes as gather
+    sources: its pass columns would gather from the wrong means, so it is refused."""
+    key = fingerprint(furnace_box(), SETTINGS.system_settings())
+    old = {**key, "layout": 3}
+    save_state(tmp_path / "old.npz", _state(3), old)
+    with pytest.raises(RaytradError, match="layout changed"):
+        load_state(tmp_path / "old.npz", key)
