@@ -34,6 +34,7 @@ import numpy as np
 
 from raytrad.core.kernels import disk_form_factor
 from raytrad.core.mesh import RadiosityMesh
+from raytrad.core.refine import longest_edge
 
 #: A sub-area (or cluster) of more triangles than this is split in two.
 CLUSTER_TRIANGLES = 8
@@ -131,7 +132,7 @@ def build_clusters(mesh: RadiosityMesh, sub_tri: np.ndarray, sub_ptr: np.ndarray
         points = centroid[sub_tri[slots]]
         offsets = np.concatenate([[0], np.cumsum(hi - lo)[:-1]])
         extent = np.maximum.reduceat(points, offsets) - np.minimum.reduceat(points, offsets)
-        axis = np.argmax(extent, axis=1)
+        axis = longest_edge(extent)  # ties to the first axis, whatever the rounding
         key = points[np.arange(len(slots)), axis[owner]]
         order = np.lexsort((sub_tri[slots], key, owner))
         sub_tri[slots] = sub_tri[slots][order]

@@ -173,3 +173,18 @@ def test_cluster_means_are_area_weighted_over_visible_corners(
                 area += mesh.triangle_area[t]
         want = total / area if area > 0 else np.zeros(3)
         np.testing.assert_allclose(extended[mesh.receiver_count + n], want, rtol=1e-12)
+
+
+def test_trees_do_not_depend_on_where_the_scene_sits() -> None:
+    """A square floor (square clusters: its axes tie) far from the origin splits as at it:
+    the longest axis is chosen with ties to the first, not by rounding."""
+    trees = []
+    for offset in (0.0, 1.0e4):
+        corners = np.array([(0, 0, 0), (1, 0, 0), (1, 0, 1), (0, 0, 1)], float) + offset
+        floor = quads_scene([corners.tolist()], facing=[(0, 1, 0)])
+        settings = MeshSettings(receivers=3000, patches=1, samples=1, emitter_samples=1)
+        mesh = build_mesh(floor, settings)
+        trees.append(build_clusters(mesh, *subarea_triangles(mesh)))
+    assert trees[0].count > 100
+    for name in ("sub_tri", "left", "right", "start"):
+        np.testing.assert_array_equal(getattr(trees[0], name), getattr(trees[1], name))
