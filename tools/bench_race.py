@@ -47,11 +47,11 @@ surface's mean ratio Cycles / reference at the largest ``--spp``.
 
     python -m pip install --no-deps 'bpy>=4.2' requests zstandard
     python tools/bench_race.py                        # 2k-20k receivers, 16-1024 spp
+    python tools/bench_race.py --receivers 5000 --spp 64 256 --threads 2 --verbose
 
 (``--no-deps``: bpy 5.0's wheel pins NumPy 1.x, which raytrad's other dependencies have
 outgrown; with NumPy 2 everything but Blender's audio module loads, and the race needs
 no audio.)
-    python tools/bench_race.py --receivers 5000 --spp 64 256 --threads 2 --verbose
 
 Exits with status 2 and one line if ``bpy`` cannot be imported.
 """
@@ -92,6 +92,8 @@ from raytrad.scene import Scene, triangle_areas_normals
 from raytrad.scene.builtin import cornell_box
 from raytrad.scene.model import barycentric_coordinates
 
+#: How to install Blender's module beside raytrad (see the module docstring).
+BPY_INSTALL = "pip install --no-deps 'bpy>=4.2' requests zstandard"
 #: The race's targets: worst-surface mean error and point-wise RMS [1].
 WORST_SURFACE_TARGET = 0.01
 POINT_RMS_TARGET = 0.02
@@ -427,20 +429,35 @@ def main(argv: list[str] | None = None) -> int:
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )
     parser.add_argument(
-        "--receivers", type=int, nargs="+", default=[2000, 5000, 7500, 10000, 20000]
+        "--receivers",
+        type=int,
+        nargs="+",
+        default=[2000, 5000, 7500, 10000, 20000],
+        help="raytrad's receiver targets, in the order raced",
     )
-    parser.add_argument("--spp", type=int, nargs="+", default=[16, 64, 256, 512, 1024])
+    parser.add_argument(
+        "--spp",
+        type=int,
+        nargs="+",
+        default=[16, 64, 256, 512, 1024],
+        help="Cycles' samples per texel, in the order raced",
+    )
     parser.add_argument("--threads", type=int, default=2, help="Cycles' CPU threads")
     parser.add_argument("--texel", type=float, default=0.005, help="Cycles' texel size [m]")
-    parser.add_argument("--per-quad", type=int, default=256)
-    parser.add_argument("--along", type=int, default=8)
+    parser.add_argument("--per-quad", type=int, default=256, help="area probes per quad")
+    parser.add_argument("--along", type=int, default=8, help="contact probes along a line")
     parser.add_argument("--paths", type=int, default=20000, help="reference paths per point")
-    parser.add_argument("--cache", type=Path, default=ROOT / ".cache" / "accuracy")
+    parser.add_argument(
+        "--cache",
+        type=Path,
+        default=ROOT / ".cache" / "accuracy",
+        help="reference cache (bench_accuracy's)",
+    )
     parser.add_argument("--verbose", action="store_true", help="every surface's error")
     args = parser.parse_args(argv)
     bpy = import_bpy()
     if bpy is None:
-        print("bench_race: bpy is not importable; install it: pip install --no-deps 'bpy>=4.2'")
+        print(f"bench_race: bpy is not importable; install it: {BPY_INSTALL}", file=sys.stderr)
         return 2
     print(f"Blender {bpy.app.version_string}, Cycles on the CPU with {args.threads} threads")
     scene = cornell_box()

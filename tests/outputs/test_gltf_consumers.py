@@ -73,7 +73,10 @@ def test_blender_imports_the_lightmap_and_shows_it(
 ) -> None:
     python = _bpy_python()
     if python is None:
-        pytest.skip("Blender's bpy is not installed (pip install bpy, or RAYTRAD_BPY_PYTHON)")
+        pytest.skip(
+            "Blender's bpy is not installed (pip install --no-deps 'bpy>=4.2' requests "
+            "zstandard, or RAYTRAD_BPY_PYTHON)"
+        )
     out, camera = baked
     picture = out / "blender.png"
     done = subprocess.run(
