@@ -117,14 +117,7 @@ def subarea_spread(
     sub_weight,
     points,
     normals,
-    sub_tri,
-    start,
-    stop,
-    left,
-    right,
-    node_point,
-    node_normal,
-    node_area,
+    tree,
     node_reach,
     node_visible,
     visible_area,
@@ -139,7 +132,9 @@ def subarea_spread(
 ):
     """Node elements' weights on receivers and means (see
     :func:`raytrad.core.spread.numpy_subarea_spread`; handed elements first, then the
-    near ones, each in element order, its items in the order of their slots)."""
+    near ones, each in element order, its items in the order of their slots). ``tree`` is
+    :attr:`raytrad.core.clusters.Clusters.arrays`."""
+    sub_tri, start, stop, left, right, node_point, node_normal, node_area = tree
     n = len(nodes)
     far = np.empty(n, dtype=np.bool_)
     stack, cut = _buffers(nodes, start, stop)
@@ -258,14 +253,7 @@ def near_triangles(
     near,
     sub_start,
     root,
-    sub_tri,
-    start,
-    stop,
-    left,
-    right,
-    node_point,
-    node_normal,
-    node_area,
+    tree,
     node_near,
     tri_corners,
     tri_normal,
@@ -291,7 +279,8 @@ def near_triangles(
     above 0: the receiver, the triangle, the ray target, the factor and the corner shares,
     by :func:`linear_corner_shares` within ``share_sizes`` triangle sizes and beyond by
     the corner form factors (:func:`_triangle_corner_weights`, 1/3 each where they are
-    0)."""
+    0). ``tree`` is :attr:`raytrad.core.clusters.Clusters.arrays`."""
+    sub_tri, start, stop, left, right, node_point, node_normal, node_area = tree
     stack, cut = _buffers(root, start, stop)
     size = 0
     whole = 0

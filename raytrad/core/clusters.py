@@ -91,6 +91,21 @@ class Clusters:
         """The number of nodes."""
         return len(self.start)
 
+    @property
+    def arrays(self) -> tuple[np.ndarray, ...]:
+        """(sub_tri, start, stop, left, right, point, normal, area): the tree as the
+        compiled walks take it (:mod:`raytrad.core._compiled_near`)."""
+        return (
+            self.sub_tri,
+            self.start,
+            self.stop,
+            self.left,
+            self.right,
+            self.point,
+            self.normal,
+            self.area,
+        )
+
     def cuts(
         self, nodes: np.ndarray, points: np.ndarray, scale: float
     ) -> tuple[np.ndarray, np.ndarray]:

@@ -183,10 +183,9 @@ PACKED_DTYPES = {
 }
 
 
-def pack_columns(patches: list[int], columns: list[Column]) -> dict[str, np.ndarray]:
+def pack_columns(parts: list[dict[str, np.ndarray]]) -> dict[str, np.ndarray]:
     """Columns as flat arrays for a checkpoint (:func:`unpack_columns` reads them back):
-    each of :func:`column_parts`' pieces concatenated over the columns."""
-    parts = [column_parts(p, c) for p, c in zip(patches, columns, strict=True)]
+    each of their :func:`column_parts`' pieces concatenated over the columns."""
     return {
         name: np.concatenate([part[name] for part in parts]) if parts else np.zeros(0, dtype)
         for name, dtype in PACKED_DTYPES.items()

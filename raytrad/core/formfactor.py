@@ -233,10 +233,7 @@ class FormFactorEngine:
         """The columns of a form-factor pass cut short, packed as flat arrays for a
         checkpoint (:meth:`restore_columns` reads them back); empty once every column is
         computed. Cached and spilled columns are kept."""
-        if self.complete:
-            return {}
-        order = [p for p in self._pass_order() if p in self._cache or p in self._spill]
-        return pack_columns(order, [self._raw_column(p) for p in order])
+        return {} if self.complete else pack_columns(list(self.pass_column_parts()))
 
     def pass_column_parts(self) -> Iterator[dict[str, np.ndarray]]:
         """:meth:`pass_columns` a column at a time (:func:`~raytrad.core.columns.column_parts`),

@@ -237,11 +237,18 @@ def corner_shares(mesh: RadiosityMesh) -> np.ndarray:
     return np.divide(share, counts, out=np.zeros_like(share), where=counts > 0)
 
 
+def visible_areas(mesh: RadiosityMesh, corner_share: np.ndarray) -> np.ndarray:
+    """(T,) each triangle's area where any of its corners is visible, else 0 [m2]
+    (``corner_share`` (T, 3), :func:`corner_shares`): what a mean or a spread by area
+    weighs it."""
+    return np.asarray(mesh.triangle_area * (corner_share.sum(axis=1) > 0))
+
+
 def cluster_means(mesh: RadiosityMesh, corner_share: np.ndarray, tree: Clusters) -> SubareaMeans:
     """Each node of ``tree`` (sub-areas and their clusters) as an area-weighted mean of its
     visible receivers: a triangle weighs its area if any corner is visible (``corner_share``
     (T, 3), :func:`corner_shares`), split over those corners."""
-    visible_area = mesh.triangle_area * (corner_share.sum(axis=1) > 0)
+    visible_area = visible_areas(mesh, corner_share)
     lengths = np.cumsum(tree.stop - tree.start)
     pointers, receivers, shares = [np.zeros(1, np.int64)], [], []
     first = 0

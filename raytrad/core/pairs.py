@@ -146,7 +146,6 @@ class PairFactors:
         self._tree = self._shares.tree
         #: within this distance of a node [m] the near field resolves it further
         self._node_near = NEAR_FACTOR * self._tree.size
-        self._node_target = self._tree.point + tol.ray_offset * self.diagonal * self._tree.normal
 
     def refined(self, mesh: RadiosityMesh) -> PairFactors:
         """The same pairs on a refinement of this mesh (same patches and sub-areas, its
@@ -424,14 +423,7 @@ class PairFactors:
                 np.ascontiguousarray(near, dtype=np.bool_),
                 sub.start,
                 tree.root,
-                tree.sub_tri,
-                tree.start,
-                tree.stop,
-                tree.left,
-                tree.right,
-                tree.point,
-                tree.normal,
-                tree.area,
+                tree.arrays,
                 self._node_near,
                 self._tri_corners,
                 self.mesh.triangle_normal,
@@ -465,7 +457,7 @@ class PairFactors:
         )
         facing = node_w > 0
         node_c, node, node_w = node_c[facing], node[facing], node_w[facing]
-        node_target = self._node_target[node]
+        node_target = tree.point[node] + tol.ray_offset * self.diagonal * tree.normal[node]
         leaf = -1 - item[~whole]
         owner, slot = runs(tree.start[leaf], tree.stop[leaf])
         tri = tree.sub_tri[slot]

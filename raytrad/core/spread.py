@@ -19,6 +19,7 @@ from raytrad.core.gather import (
     cluster_means,
     corner_shares,
     sum_shares,
+    visible_areas,
 )
 from raytrad.core.mesh import RadiosityMesh
 
@@ -48,7 +49,7 @@ class GatherShares:
         self.tri_corners = mesh.positions[mesh.triangles]
         self.tri_normal = mesh.triangle_normal
         #: (T,) area of each triangle with a visible corner [m2], and (N,) of each node
-        self.visible_area = mesh.triangle_area * (self.corner_share.sum(axis=1) > 0)
+        self.visible_area = visible_areas(mesh, self.corner_share)
         cumulative = np.concatenate([[0.0], np.cumsum(self.visible_area[self.tree.sub_tri])])
         self.node_visible = cumulative[self.tree.stop] - cumulative[self.tree.start]
         self.node_reach = MIDPOINT_SIZES * self.tree.size
@@ -128,14 +129,7 @@ def subarea_spread(
         floats(sub_weight),
         floats(points),
         floats(normals),
-        tree.sub_tri,
-        tree.start,
-        tree.stop,
-        tree.left,
-        tree.right,
-        tree.point,
-        tree.normal,
-        tree.area,
+        tree.arrays,
         shares.node_reach,
         shares.node_visible,
         shares.visible_area,
