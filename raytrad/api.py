@@ -268,13 +268,13 @@ def render(
             monitor = ConvergenceMonitor(prepared.mesh, prepared.engine, ref)
             on_shot = shot_hook(monitor, progress, settings, save)
             with timed(timings, "solve"):
-                solve_settings = budget.solve_settings(
-                    settings.solve, state.seconds if state else 0
-                )
+                resumed = state.seconds if state else 0
+                solve_settings = budget.solve_settings(settings.solve, resumed)
                 result = solve_system(
                     prepared.mesh, prepared.engine, solve_settings, state, on_shot, stop
                 )
             error_log = monitor.finish(result.state)
+            prepared.engine.release_columns()  # refinement and the outputs need none
             check_output_range(result.radiosity, scene_path)
             solved = prepared
             with timed(timings, "refine"):

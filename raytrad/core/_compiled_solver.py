@@ -11,7 +11,14 @@ computes what its numpy reference computes (:mod:`raytrad.core.solver`,
 import numpy as np
 
 #: Every function to compile, each after the helpers it calls.
-KERNELS = ("patch_spread", "patch_average", "shoot", "_row_scales", "sinkhorn_columns")
+KERNELS = (
+    "patch_spread",
+    "patch_average",
+    "shoot",
+    "column_capture",
+    "column_accumulate",
+    "column_final",
+)
 
 
 def patch_spread(
@@ -176,68 +183,29 @@ def shoot(
     return power, reflected, capture
 
 
-def _row_scales(pointer, rows, values, col_scale, fixed_rows, out):
-    """Row scales holding the fixed rows of ``F diag(col_scale)`` to a sum of 1, in place
-    (see :func:`raytrad.core.balance._row_scales`)."""
-    out[:] = 0.0
-    for p in range(len(pointer) - 1):
-        for k in range(pointer[p], pointer[p + 1]):
-            out[rows[k]] += values[k] * col_scale[p]
-    for j in range(len(out)):
-        if fixed_rows[j] and out[j] > 0.0:
-            out[j] = 1.0 / max(out[j], 1e-300)
-        else:
-            out[j] = 1.0
+def column_capture(rows, values, receiver_area, row_scale):
+    """``sum a F r`` of one column (see :func:`raytrad.core.balance.numpy_column_capture`)."""
+    capture = 0.0
+    for k in range(len(rows)):
+        j = rows[k]
+        capture += receiver_area[j] * values[k] * row_scale[j]
+    return capture
 
 
-def sinkhorn_columns(
-    pointer,
-    rows,
-    values,
-    receiver_area,
-    patch_area,
-    fixed_rows,
-    closed_columns,
-    iterations,
-    converged,
-):
-    """:func:`raytrad.core.balance.sinkhorn` over columns stored end to end (CSR by patch),
-    with no per-entry temporaries; also the captures before and after and the balanced row
-    sums (see :func:`raytrad.core.balance.balance_columns`)."""
-    total = len(patch_area)
-    col_scale = np.ones(total)
-    row_scale = np.ones(len(receiver_area))
-    capture0 = np.zeros(total)
-    for p in range(total):
-        for k in range(pointer[p], pointer[p + 1]):
-            capture0[p] += receiver_area[rows[k]] * values[k]
-        capture0[p] /= patch_area[p]
-    done = 0
-    while done < iterations:
-        done += 1
-        _row_scales(pointer, rows, values, col_scale, fixed_rows, row_scale)
-        change = 0.0
-        for p in range(total):
-            capture = 0.0
-            for k in range(pointer[p], pointer[p + 1]):
-                j = rows[k]
-                capture += receiver_area[j] * values[k] * row_scale[j]
-            capture /= patch_area[p]
-            new = 1.0
-            if capture > 1.0 or closed_columns[p]:
-                new = 1.0 / capture
-            change = max(change, abs(new / col_scale[p] - 1.0))
-            col_scale[p] = new
-        if change < converged:
-            break
-    _row_scales(pointer, rows, values, col_scale, fixed_rows, row_scale)
-    final_rows = np.zeros(len(receiver_area))
-    capture = np.zeros(total)
-    for p in range(total):
-        for k in range(pointer[p], pointer[p + 1]):
-            j = rows[k]
-            final = values[k] * col_scale[p] * row_scale[j]
-            final_rows[j] += final
-            capture[p] += receiver_area[j] * final
-        capture[p] /= patch_area[p]
-    return row_scale, col_scale, done, capture0, capture, final_rows
+def column_accumulate(rows, values, scale, row_sum):
+    """``row_sum[rows] += values * scale`` (see
+    :func:`raytrad.core.balance.numpy_column_accumulate`)."""
+    for k in range(len(rows)):
+        row_sum[rows[k]] += values[k] * scale
+
+
+def column_final(rows, values, receiver_area, row_scale, scale, row_sums):
+    """Balanced factors into ``row_sums``, and the capture (see
+    :func:`raytrad.core.balance.numpy_column_final`)."""
+    capture = 0.0
+    for k in range(len(rows)):
+        j = rows[k]
+        final = values[k] * scale * row_scale[j]
+        row_sums[j] += final
+        capture += receiver_area[j] * final
+    return capture

@@ -28,9 +28,11 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from raytrad.constants import tol
-from raytrad.core.formfactor import ROW_FIX_LIMIT, FormFactorEngine, receiver_points
+from raytrad.core.columns import return_freed_memory
+from raytrad.core.formfactor import ROW_FIX_LIMIT, FormFactorEngine
 from raytrad.core.gather import gathered_irradiance
 from raytrad.core.mesh import MAX_RECEIVERS, RadiosityMesh, surface_receivers
+from raytrad.core.pairs import receiver_points
 from raytrad.core.refine import refine
 from raytrad.core.visibility import Occluder
 from raytrad.errors import SettingsError
@@ -196,10 +198,12 @@ def refine_adaptively(
         new = np.arange(out.mesh.receiver_count, refined.receiver_count)
         if len(new) == 0:
             break
+        level = _level(out.mesh, out.radiosity)
         before = _interpolated(out.mesh, out.radiosity, refined, parent, new)
         # the near field is gathered from the refined mesh: a receiver close to a sharp
         # edge (a shadow at a block's corner) sees it as sharp as the mesh has it now
         current = np.concatenate([out.radiosity, before])
+        out.mesh = refined  # the coarser mesh goes before the refined tables are built
         near = engine.refined(refined)
         try:
             refined, gathered = _gather(
@@ -209,8 +213,10 @@ def refine_adaptively(
             near.close()
         out.rays += near.rays_cast
         out.rays_naive += near.rays_naive
+        del near  # its tables, the size of the mesh's, go before the next round's are built
+        return_freed_memory()
         changes.append((before - gathered, refined.receiver_area[new]))
-        found = np.concatenate([found, _found(out.mesh, out.radiosity, before, gathered, settings)])
+        found = np.concatenate([found, _found(level, before, gathered, settings)])
         found[new[refined.receiver_area[new] == 0]] = 0.0  # hidden: nothing to interpolate
         out.radiosity = np.concatenate([out.radiosity, gathered])
         out.mesh = refined
@@ -289,17 +295,13 @@ def _level(mesh: RadiosityMesh, radiosity: np.ndarray) -> float:
 
 
 def _found(
-    mesh: RadiosityMesh,
-    radiosity: np.ndarray,
-    before: np.ndarray,
-    gathered: np.ndarray,
-    settings: RefineSettings,
+    level: float, before: np.ndarray, gathered: np.ndarray, settings: RefineSettings
 ) -> np.ndarray:
     """(N,) how far new receivers' gathered luminance is from the interpolation ``before``
-    it replaced, relative to their own, floored at ``settings.floor`` times the level of
-    ``mesh`` and ``radiosity`` (the mesh before the round) [1]."""
+    it replaced, relative to their own, floored at ``settings.floor`` times ``level``
+    (:func:`_level` of the mesh before the round) [1]."""
     got = gathered @ _LUMINANCE
-    floor = max(settings.floor * _level(mesh, radiosity), 1e-300)
+    floor = max(settings.floor * level, 1e-300)
     return np.asarray(np.abs(got - before @ _LUMINANCE) / np.maximum(got, floor))
 
 
@@ -390,7 +392,7 @@ def final_gather(
     patch_radiosity : (P, 3) float64 [W m-2]
     points, normals : (N, 3) float64
         Evaluation points [m] (off edges, see
-        :func:`~raytrad.core.formfactor.receiver_points`) and unit normals.
+        :func:`~raytrad.core.pairs.receiver_points`) and unit normals.
     reflectance, emitted_exitance : (N, 3) float64
         Of the surfaces the points lie on [1], [W m-2].
     own : (N,) int or None

@@ -4,6 +4,8 @@ receiver-by-patch matrix, ``F'_jp = r_j F_jp c_p`` (see
 
 from __future__ import annotations
 
+from collections.abc import Callable, Iterable, Iterator
+from types import SimpleNamespace
 from typing import NamedTuple
 
 import numpy as np
@@ -70,7 +72,9 @@ def sinkhorn(
         weight = receiver_area * values * row_scale[rows]
         capture = np.bincount(owner, weights=weight, minlength=total) / patch_area
         new_col = np.ones(total)
-        np.divide(1.0, capture, out=new_col, where=(capture > 1.0) | closed_columns)
+        np.divide(
+            1.0, capture, out=new_col, where=(capture > 1.0) | (closed_columns & (capture > 0))
+        )
         change = np.abs(new_col / col_scale - 1.0).max(initial=0.0)
         col_scale = new_col
         if change < BALANCE_CONVERGED:
@@ -98,6 +102,74 @@ class Balanced(NamedTuple):
     row_sums: np.ndarray
 
 
+#: ``columns()`` of :func:`balance_streamed`: a fresh iterator over (patch, rows, values)
+#: of every patch, ascending.
+ColumnSource = Callable[[], Iterable[tuple[int, np.ndarray, np.ndarray]]]
+
+
+def balance_streamed(
+    columns: ColumnSource,
+    receiver_area: np.ndarray,
+    patch_area: np.ndarray,
+    fixed_rows: np.ndarray,
+    closed_columns: np.ndarray,
+    iterations: int = BALANCE_ITERATIONS,
+) -> Balanced:
+    """:func:`sinkhorn` one column at a time, with the captures and row sums: balancing
+    holds no more than one column beyond what ``columns`` keeps (the form-factor cache;
+    spilled columns are read back each round).
+
+    Each round is one sweep over the columns: patch p's capture under the current row
+    scales gives its new column scale, and its entries are then added to the next
+    round's row sums at that scale. That is the order :func:`sinkhorn` computes in, so the
+    results are the same (to rounding) in ``iterations + 2`` sweeps. The per-column loops
+    are compiled when available (:func:`numpy_balance_columns` is the reference).
+
+    Parameters
+    ----------
+    columns : callable
+        ``columns()`` iterates (patch, rows, values) of every patch in ascending patch
+        order, each time it is called: rows (K_p,) int receivers, values (K_p,) float32 or
+        float64 F_jp [1]; a patch not yielded has no entries.
+    receiver_area : (R,) float64 [m2]
+    patch_area : (P,) float64 [m2]
+    fixed_rows : (R,) bool
+    closed_columns : (P,) bool
+    iterations : int
+    """
+    step = _column_steps()
+    area = np.ascontiguousarray(receiver_area, dtype=np.float64)
+    total = len(patch_area)
+    col_scale = np.ones(total)
+    capture0 = np.zeros(total)
+    row_sum = np.zeros(len(area))
+    ones = np.ones(len(area))
+    for p, rows, values in columns():
+        capture0[p] = step.column_capture(rows, values, area, ones) / patch_area[p]
+        step.column_accumulate(rows, values, 1.0, row_sum)
+    row_scale = _fixed_row_scales(row_sum, fixed_rows)
+    done = 0
+    while done < iterations:
+        done += 1
+        row_sum[:] = 0.0
+        new = np.ones(total)  # a patch with no entries captures nothing: scale 1
+        for p, rows, values in columns():
+            capture = step.column_capture(rows, values, area, row_scale) / patch_area[p]
+            new[p] = _column_scale(capture, closed_columns[p])
+            step.column_accumulate(rows, values, float(new[p]), row_sum)
+        change = np.abs(new / col_scale - 1.0).max(initial=0.0)
+        col_scale = new
+        row_scale = _fixed_row_scales(row_sum, fixed_rows)
+        if change < BALANCE_CONVERGED:
+            break
+    row_sums = np.zeros(len(area))
+    capture = np.zeros(total)
+    for p, rows, values in columns():
+        final = step.column_final(rows, values, area, row_scale, float(col_scale[p]), row_sums)
+        capture[p] = final / patch_area[p]
+    return Balanced(row_scale, col_scale, done, capture0, capture, row_sums)
+
+
 def balance_columns(
     pointer: np.ndarray,
     rows: np.ndarray,
@@ -108,11 +180,7 @@ def balance_columns(
     closed_columns: np.ndarray,
     iterations: int = BALANCE_ITERATIONS,
 ) -> Balanced:
-    """:func:`sinkhorn` on columns stored end to end, with the captures and row sums.
-
-    Compiled when available: one loop over the entries per round and no per-entry
-    temporaries, so balancing needs no memory beyond the columns themselves;
-    :func:`numpy_balance_columns` is the reference.
+    """:func:`balance_streamed` over columns stored end to end.
 
     Parameters
     ----------
@@ -128,23 +196,71 @@ def balance_columns(
     closed_columns : (P,) bool
     iterations : int
     """
-    fast = compiled.get()
-    if fast is None:
-        return numpy_balance_columns(
-            pointer, rows, values, receiver_area, patch_area, fixed_rows, closed_columns, iterations
-        )
-    out = fast.sinkhorn_columns(
-        np.ascontiguousarray(pointer, dtype=np.int64),
-        np.ascontiguousarray(rows),
-        np.ascontiguousarray(values),
-        np.ascontiguousarray(receiver_area, dtype=np.float64),
-        np.ascontiguousarray(patch_area, dtype=np.float64),
-        np.ascontiguousarray(fixed_rows, dtype=np.bool_),
-        np.ascontiguousarray(closed_columns, dtype=np.bool_),
-        int(iterations),
-        BALANCE_CONVERGED,
+    rows, values = np.ascontiguousarray(rows), np.ascontiguousarray(values)
+
+    def columns() -> Iterator[tuple[int, np.ndarray, np.ndarray]]:
+        for p in range(len(pointer) - 1):
+            yield p, rows[pointer[p] : pointer[p + 1]], values[pointer[p] : pointer[p + 1]]
+
+    return balance_streamed(
+        columns, receiver_area, patch_area, fixed_rows, closed_columns, iterations
     )
-    return Balanced(out[0], out[1], int(out[2]), out[3], out[4], out[5])
+
+
+def _column_scale(capture: float, closed: bool) -> float:
+    """A column's scale for its capture: 1 / capture when it is closed or above 1 (and 1
+    when it captures nothing)."""
+    return 1.0 / capture if capture > 1.0 or (closed and capture > 0.0) else 1.0
+
+
+def _fixed_row_scales(row_sum: np.ndarray, fix: np.ndarray) -> np.ndarray:
+    """(R,) scales that bring the ``fix`` rows' sums to 1 (1 elsewhere)."""
+    return np.where(fix & (row_sum > 0), 1.0 / np.maximum(row_sum, 1e-300), 1.0)
+
+
+def _column_steps() -> SimpleNamespace:
+    """The per-column loops of :func:`balance_streamed`: compiled, or numpy."""
+    fast = compiled.get()
+    if fast is not None:
+        return SimpleNamespace(
+            column_capture=fast.column_capture,
+            column_accumulate=fast.column_accumulate,
+            column_final=fast.column_final,
+        )
+    return SimpleNamespace(
+        column_capture=numpy_column_capture,
+        column_accumulate=numpy_column_accumulate,
+        column_final=numpy_column_final,
+    )
+
+
+def numpy_column_capture(
+    rows: np.ndarray, values: np.ndarray, receiver_area: np.ndarray, row_scale: np.ndarray
+) -> float:
+    """``sum_k a_j(k) F_k r_j(k)`` of one column [m2]."""
+    return float(np.sum(receiver_area[rows] * values * row_scale[rows]))
+
+
+def numpy_column_accumulate(
+    rows: np.ndarray, values: np.ndarray, scale: float, row_sum: np.ndarray
+) -> None:
+    """``row_sum[rows] += values * scale`` (the rows of a column are distinct)."""
+    row_sum[rows] += np.asarray(values, dtype=np.float64) * scale
+
+
+def numpy_column_final(
+    rows: np.ndarray,
+    values: np.ndarray,
+    receiver_area: np.ndarray,
+    row_scale: np.ndarray,
+    scale: float,
+    row_sums: np.ndarray,
+) -> float:
+    """Adds one column's balanced factors ``F r c`` to ``row_sums``; returns its capture
+    ``sum a F r c`` [m2]."""
+    final = np.asarray(values, dtype=np.float64) * scale * row_scale[rows]
+    row_sums[rows] += final
+    return float(np.sum(receiver_area[rows] * final))
 
 
 def numpy_balance_columns(
@@ -179,7 +295,7 @@ def numpy_balance_columns(
 def _row_scales(factors: Sparse, values: np.ndarray, fix: np.ndarray) -> np.ndarray:
     """(R,) scales that make the ``fix`` rows of ``values`` sum to 1 (1 elsewhere)."""
     row_sum = np.bincount(factors.rows, weights=values, minlength=factors.row_count)
-    return np.where(fix & (row_sum > 0), 1.0 / np.maximum(row_sum, 1e-300), 1.0)
+    return _fixed_row_scales(row_sum, fix)
 
 
 def closed_patches(mesh: RadiosityMesh, closed: np.ndarray) -> np.ndarray:
@@ -199,8 +315,10 @@ __all__ = [
     "BALANCE_CONVERGED",
     "BALANCE_ITERATIONS",
     "Balanced",
+    "ColumnSource",
     "Sparse",
     "balance_columns",
+    "balance_streamed",
     "closed_patches",
     "numpy_balance_columns",
     "sinkhorn",

@@ -14,6 +14,7 @@ orders of magnitude.
 
 from __future__ import annotations
 
+import ctypes
 import logging
 import os
 import tempfile
@@ -135,12 +136,46 @@ class ColumnSpill:
             )
             return Column(data["receivers"], data["factors"], 0, gather)
 
+    def read_factors(self, patch: int) -> tuple[np.ndarray, np.ndarray] | None:
+        """(receivers, factors) of a spilled column, its gather weights left on disk; or
+        None."""
+        path = self._paths.get(patch)
+        if path is None:
+            return None
+        with np.load(path) as data:
+            return data["receivers"], data["factors"]
+
     def close(self) -> None:
         """Remove the spill files."""
         if self._folder is not None:
             self._folder.cleanup()
             self._folder = None
         self._paths.clear()
+
+
+def return_freed_memory() -> None:
+    """Hand memory freed by dropped columns back to the system (glibc's ``malloc_trim``).
+
+    Columns of a few MB freed between larger allocations stay in the C heap otherwise,
+    counted in the process's resident memory while refinement builds its own tables.
+    Does nothing where the C library has no ``malloc_trim``."""
+    try:
+        ctypes.CDLL(None).malloc_trim(0)
+    except (OSError, AttributeError, TypeError):  # not glibc
+        pass
+
+
+def compact_gather(gather: GatherWeights, index: type) -> GatherWeights:
+    """Gather weights as the columns keep them (see :class:`Column`): receiver indices as
+    ``index``, shares as float32 (each near receiver's still sum to 1 within float32
+    rounding; the solve conserves power separately)."""
+    return GatherWeights(
+        gather.receivers.astype(index),
+        gather.factors,
+        gather.pointer.astype(np.int64),
+        gather.sources.astype(index),
+        gather.weights.astype(np.float32),
+    )
 
 
 def column_parts(patch: int, column: Column) -> dict[str, np.ndarray]:
@@ -216,4 +251,12 @@ def unpack_columns(packed: dict[str, np.ndarray], index: type) -> list[tuple[int
     return out
 
 
-__all__ = ["Column", "ColumnSpill", "pack_columns", "unpack_columns"]
+__all__ = [
+    "Column",
+    "ColumnSpill",
+    "column_parts",
+    "compact_gather",
+    "pack_columns",
+    "return_freed_memory",
+    "unpack_columns",
+]

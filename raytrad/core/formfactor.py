@@ -28,12 +28,14 @@ from typing import TypeVar
 import numpy as np
 
 from raytrad.constants import scene_diagonal, tol
-from raytrad.core.balance import BALANCE_ITERATIONS, balance_columns, closed_patches
+from raytrad.core.balance import BALANCE_ITERATIONS, balance_streamed, closed_patches
 from raytrad.core.columns import (
     Column,
     ColumnSpill,
     column_parts,
+    compact_gather,
     pack_columns,
+    return_freed_memory,
     unpack_columns,
 )
 from raytrad.core.gather import (
@@ -45,8 +47,8 @@ from raytrad.core.gather import (
     join_gathers,
 )
 from raytrad.core.mesh import RadiosityMesh
-from raytrad.core.pairs import PairFactors
-from raytrad.core.visibility import Occluder, worker_count
+from raytrad.core.pairs import PairFactors, receiver_points
+from raytrad.core.visibility import Occluder, ordered_map, worker_count
 
 log = logging.getLogger(__name__)
 _T = TypeVar("_T")
@@ -56,6 +58,10 @@ _T = TypeVar("_T")
 ROW_FIX_LIMIT = 0.25
 #: Row sums of an occlusion-free scene within this of 1 count as closed (exact factors).
 EXACT_ROW_SUM = 1e-6
+#: Columns a worker may have computed or under way beyond the one the pass is taking: two
+#: keep every core busy, and a million-receiver column with its gather weights can take
+#: 60 MB, so that the pass's memory stays bounded while a checkpoint is written.
+AHEAD_PER_WORKER = 2
 
 
 #: What :meth:`FormFactorEngine.balance` reports when the pass was cut short.
@@ -169,6 +175,18 @@ class FormFactorEngine:
             self._pool = None
         self._spill.close()
 
+    def release_columns(self) -> None:
+        """Drop the cached and spilled columns once the solve is done with them (a render
+        then refines and writes without holding ``--cache-mb`` of them): a later
+        :meth:`column` computes a column again. Only a complete pass's columns go; a pass
+        cut short keeps them for its checkpoint."""
+        if not self.complete:
+            return
+        self._cache.clear()
+        self._cached_bytes = 0
+        self._spill.close()
+        return_freed_memory()
+
     def column(self, patch: int) -> Column:
         """F(receiver <- patch) for every receiver that can see it (balanced, see
         :meth:`balance`, once that has run), in float64."""
@@ -211,6 +229,17 @@ class FormFactorEngine:
         if cached is not None:
             return cached
         return self._spill.read(patch)
+
+    def _known_factors(self, patch: int) -> tuple[np.ndarray, np.ndarray]:
+        """(receivers, raw factors) of a computed column, without its gather weights."""
+        cached = self._cache.get(patch)
+        if cached is not None:
+            return cached.receivers, cached.factors
+        spilled = self._spill.read_factors(patch)
+        if spilled is not None:
+            return spilled
+        col = self._raw_column(patch)  # computed again: its spill file failed
+        return col.receivers, col.factors
 
     def _store(self, patch: int, col: Column) -> Column:
         """Count, sum and (while it fits) cache a newly computed column."""
@@ -263,7 +292,7 @@ class FormFactorEngine:
         computed a patch per thread on every core."""
         patches = list(patches)
         todo = [p for p in patches if p not in self._cache and p not in self._spill]
-        done = self._per_patch(self._compute, todo)
+        done = self._per_patch(self._compute, todo, bounded=True)
         try:
             for patch in patches:
                 known = self._known(patch)
@@ -272,10 +301,13 @@ class FormFactorEngine:
             done.close()
 
     def _per_patch(
-        self, work: Callable[[int], _T], patches: list[int]
+        self, work: Callable[[int], _T], patches: list[int], bounded: bool = False
     ) -> Generator[_T, None, None]:
         """``work(patch)`` for each patch, in order, on every core; each patch's chunks
-        then run in its own thread."""
+        then run in its own thread. ``bounded`` (the pass's columns): at most
+        :data:`AHEAD_PER_WORKER` a worker run ahead of the one taken, so that they do not
+        pile up in memory while the caller is busy (a checkpoint written); unbounded, a
+        slow patch never leaves a core idle behind it."""
         if worker_count() == 1 or len(patches) < 2:
             yield from map(work, patches)
             return
@@ -287,7 +319,10 @@ class FormFactorEngine:
             finally:
                 _WORKER.active = False
 
-        yield from self._executor().map(task, patches)
+        if not bounded:
+            yield from self._executor().map(task, patches)
+            return
+        yield from ordered_map(self._executor(), task, patches, AHEAD_PER_WORKER * worker_count())
 
     def _executor(self) -> ThreadPoolExecutor:
         with self._lock:
@@ -349,12 +384,13 @@ class FormFactorEngine:
         """
         mesh = self.mesh
         total = mesh.patch_count
-        columns: list[Column | None] = [None] * total
+        held: dict[int, tuple[np.ndarray, np.ndarray]] = {}  # neither cached nor spilled
         order = self._pass_order()
         known = sum(1 for p in order.tolist() if p in self._cache or p in self._spill)
         computed = self.raw_columns(order)
         for done, (patch, col) in enumerate(computed, start=1):
-            columns[patch] = Column(col.receivers, col.factors, 0)  # balancing needs no gather
+            if patch not in self._cache and patch not in self._spill:
+                held[patch] = (col.receivers, col.factors)  # balancing needs no gather
             if progress is not None and done > known:  # columns restored take no time
                 progress(done - known, total - known)
             if done < total and stop is not None and stop():
@@ -367,7 +403,7 @@ class FormFactorEngine:
                     total,
                 )
                 return _UNBALANCED | {"complete": False}
-        return self._balance([c for c in columns if c is not None], closed, iterations)
+        return self._balance(held, closed, iterations)
 
     def _pass_order(self) -> np.ndarray:
         """Patches by the order the form-factor pass computes them: emitters first, then
@@ -383,30 +419,27 @@ class FormFactorEngine:
         return np.lexsort((np.arange(m.patch_count), -power, ~emits))
 
     def _balance(
-        self, columns: list[Column], closed: np.ndarray | None, iterations: int
+        self,
+        held: dict[int, tuple[np.ndarray, np.ndarray]],
+        closed: np.ndarray | None,
+        iterations: int,
     ) -> dict[str, float | bool]:
         mesh = self.mesh
-        total = mesh.patch_count
         sums = self._row_sum.copy()
         if closed is None:
             closed = np.abs(sums - 1.0) < EXACT_ROW_SUM
         fix_rows = closed & (np.abs(sums - 1.0) < ROW_FIX_LIMIT) & (sums > 0)
-        lengths = np.array([len(c.receivers) for c in columns], dtype=np.int64)
-        pointer = np.concatenate([[0], np.cumsum(lengths)]).astype(np.int64)
-        rows = np.concatenate([c.receivers for c in columns]) if total else np.zeros(0, int)
-        values = np.concatenate([c.factors for c in columns]) if total else np.zeros(0)
         closed_patch = closed_patches(mesh, fix_rows)
-        found = balance_columns(
-            pointer,
-            rows,
-            values,
-            mesh.receiver_area,
-            mesh.patch_area,
-            fix_rows,
-            closed_patch,
-            iterations,
+
+        def columns() -> Iterator[tuple[int, np.ndarray, np.ndarray]]:
+            # a column at a time: cached, held, or read back from its spill file
+            for patch in range(mesh.patch_count):
+                factors = held[patch] if patch in held else self._known_factors(patch)
+                yield (patch, *factors)
+
+        found = balance_streamed(
+            columns, mesh.receiver_area, mesh.patch_area, fix_rows, closed_patch, iterations
         )
-        del rows, values
         row_scale, col_scale, done = found.row_scale, found.column_scale, found.iterations
         capture0, capture = found.capture_before, found.capture_after
         self._row_scale = row_scale
@@ -457,7 +490,7 @@ class FormFactorEngine:
         )
         keep = factors > 0
         gather = gather.subset(keep[gather.receivers])
-        gather = _compact(
+        gather = compact_gather(
             GatherWeights(
                 candidates[gather.receivers],
                 factors[gather.receivers],
@@ -535,7 +568,7 @@ class FormFactorEngine:
             self.rays_cast += rays
             factors = factors * self._col_scale[patch]
             rows.row_sum[near] += factors
-            rows.patches.append((patch, near, factors, _compact(gather, self._index)))
+            rows.patches.append((patch, near, factors, compact_gather(gather, self._index)))
         return rows
 
     def factors_at(self, points: np.ndarray, normals: np.ndarray, patch: int) -> np.ndarray:
@@ -587,40 +620,3 @@ class FormFactorEngine:
             sum(p[1] for p in parts),
             join_gathers([p[2] for p in parts], [a for a, _ in spans]),
         )
-
-
-def _compact(gather: GatherWeights, index: type) -> GatherWeights:
-    """Gather weights as the columns keep them (see :class:`~raytrad.core.columns.Column`):
-    receiver indices as ``index``, shares as float32 (each near receiver's still sum to
-    1 within float32 rounding; the solve conserves power separately)."""
-    return GatherWeights(
-        gather.receivers.astype(index),
-        gather.factors,
-        gather.pointer.astype(np.int64),
-        gather.sources.astype(index),
-        gather.weights.astype(np.float32),
-    )
-
-
-def receiver_points(mesh: RadiosityMesh, offset: float) -> tuple[np.ndarray, np.ndarray]:
-    """Where each receiver's factors are evaluated, and where its rays start.
-
-    A receiver on an edge where two surfaces meet (a room corner, a block on the floor)
-    lies in the other surface's plane: there the factor to that surface is 0 instead of its
-    limit (1/2 for a perpendicular wall) and a ray starting there is called occluded or not
-    at Embree's whim. So the evaluation point moves a few ``offset`` into the receiver's own
-    triangles (staying in its plane), and rays start from there, ``offset`` along the normal.
-
-    Returns
-    -------
-    points : (R, 3) float64 [m]
-    origins : (R, 3) float64 [m]
-    """
-    x, n = mesh.receiver_position, mesh.receiver_normal
-    inward = mesh.receiver_inward - x
-    inward -= np.einsum("ij,ij->i", inward, n)[:, None] * n
-    length = np.linalg.norm(inward, axis=1)
-    step = np.minimum(4.0 * offset, 0.25 * length)
-    direction = inward / np.where(length > 0, length, 1.0)[:, None]
-    points = x + step[:, None] * direction
-    return points, points + offset * n

@@ -40,7 +40,7 @@ GATHER_RADII = 6.0
 MIDPOINT_SIZES = 5.0
 #: Node slots (a triangle counted once for each node holding it) per batch while the
 #: means are summed: bounds the temporaries at a million receivers.
-MEAN_SLOTS = 1 << 21
+MEAN_SLOTS = 1 << 18
 
 
 @dataclass(frozen=True)
@@ -145,8 +145,12 @@ def gathered_irradiance(
     """(N, 3) irradiance [W m-2] the points of ``rows`` gather from a solution: receiver
     ``radiosity`` (R, 3) and its patch means ``patch_radiosity`` (P, 3) [W m-2]."""
     irradiance = np.zeros((rows.count, 3))
-    if rows.means is not None:
-        radiosity = rows.means.extend(radiosity)
+    if rows.means is not None:  # only the means the rows read (a few new points' worth)
+        base = rows.means.base
+        read = [g.sources[g.sources >= base] for _, _, _, g in rows.patches]
+        radiosity = rows.means.extend(
+            radiosity, np.unique(np.concatenate([*read, EMPTY.sources])) - base
+        )
     for patch, near, factors, gather in rows.patches:
         irradiance[near] += factors[:, None] * patch_radiosity[patch]
         if len(gather.receivers):
@@ -189,8 +193,10 @@ class SubareaMeans:
     shares: np.ndarray
     patch_ptr: np.ndarray
 
-    def extend(self, radiosity: np.ndarray) -> np.ndarray:
-        """(R + N, 3) the (R, 3) receiver ``radiosity`` followed by its nodes' means.
+    def extend(self, radiosity: np.ndarray, nodes: np.ndarray | None = None) -> np.ndarray:
+        """(R + N, 3) the (R, 3) receiver ``radiosity`` followed by its nodes' means: of
+        every node, or only of ``nodes`` ((K,) int, the ones a gather reads; the others
+        are left 0).
 
         Raises
         ------
@@ -200,15 +206,38 @@ class SubareaMeans:
         """
         if len(radiosity) != self.base:
             raise ValueError(f"radiosity of {len(radiosity)} receivers for a mesh of {self.base}")
-        return np.concatenate([radiosity, self.of(np.arange(len(self.pointer) - 1), radiosity)])
+        count = len(self.pointer) - 1
+        if nodes is not None:
+            out = np.zeros((self.base + count, 3))
+            out[: self.base] = radiosity
+            out[self.base + nodes] = self.of(nodes, radiosity)
+            return out
+        owner = np.repeat(np.arange(count), np.diff(self.pointer))
+        means = _weighted_sums(owner, self.shares, self.receivers, radiosity, count)
+        return np.concatenate([radiosity, means])
 
     def of(self, nodes: np.ndarray, radiosity: np.ndarray) -> np.ndarray:
         """(K, 3) means of ``radiosity`` ((R, 3) or longer) over the (K,) ``nodes``."""
         owner, index = _csr_slots(self.pointer, nodes)
-        values = self.shares[index, None] * radiosity[self.receivers[index]]
-        count = len(nodes)
-        means = [np.bincount(owner, weights=values[:, k], minlength=count) for k in range(3)]
-        return np.stack(means, axis=1)
+        return _weighted_sums(
+            owner, self.shares[index], self.receivers[index], radiosity, len(nodes)
+        )
+
+
+def _weighted_sums(
+    owner: np.ndarray,
+    shares: np.ndarray,
+    receivers: np.ndarray,
+    radiosity: np.ndarray,
+    count: int,
+) -> np.ndarray:
+    """(count, 3) ``sum shares * radiosity[receivers]`` per ``owner``, a channel at a time
+    (no (Q, 3) temporaries: at a million receivers a refinement round's means read about
+    eight million shares)."""
+    out = np.empty((count, 3))
+    for k in range(3):
+        out[:, k] = np.bincount(owner, weights=shares * radiosity[receivers, k], minlength=count)
+    return out
 
 
 def subarea_triangles(mesh: RadiosityMesh) -> tuple[np.ndarray, np.ndarray]:

@@ -141,8 +141,8 @@ class PairFactors:
     def _triangle_tables(self) -> None:
         """The tables that follow the mesh's triangles (rebuilt on a refined mesh)."""
         mesh = self.mesh
-        self._tri_corners = mesh.positions[mesh.triangles]
         self._shares = GatherShares(mesh, *subarea_triangles(mesh))
+        self._tri_corners = self._shares.tri_corners  # (T, 3, 3), one copy for both
         self._tree = self._shares.tree
         #: within this distance of a node [m] the near field resolves it further
         self._node_near = NEAR_FACTOR * self._tree.size
@@ -553,3 +553,27 @@ def numpy_visible_factors(
     )
     visible = np.where(total > 0, 1.0 - hidden / np.where(total > 0, total, 1.0), 0.0)
     return np.asarray(np.where(doubt, unoccluded * np.clip(visible, 0.0, 1.0), unoccluded))
+
+
+def receiver_points(mesh: RadiosityMesh, offset: float) -> tuple[np.ndarray, np.ndarray]:
+    """Where each receiver's factors are evaluated, and where its rays start.
+
+    A receiver on an edge where two surfaces meet (a room corner, a block on the floor)
+    lies in the other surface's plane: there the factor to that surface is 0 instead of its
+    limit (1/2 for a perpendicular wall) and a ray starting there is called occluded or not
+    at Embree's whim. So the evaluation point moves a few ``offset`` into the receiver's own
+    triangles (staying in its plane), and rays start from there, ``offset`` along the normal.
+
+    Returns
+    -------
+    points : (R, 3) float64 [m]
+    origins : (R, 3) float64 [m]
+    """
+    x, n = mesh.receiver_position, mesh.receiver_normal
+    inward = mesh.receiver_inward - x
+    inward -= np.einsum("ij,ij->i", inward, n)[:, None] * n
+    length = np.linalg.norm(inward, axis=1)
+    step = np.minimum(4.0 * offset, 0.25 * length)
+    direction = inward / np.where(length > 0, length, 1.0)[:, None]
+    points = x + step[:, None] * direction
+    return points, points + offset * n

@@ -31,8 +31,9 @@ from raytrad.core.accuracy import (
 )
 from raytrad.core.adaptive import Refinement, RefineSettings, refine_adaptively
 from raytrad.core.convergence import counted_receivers
-from raytrad.core.formfactor import FormFactorEngine, receiver_points
+from raytrad.core.formfactor import FormFactorEngine
 from raytrad.core.mesh import MeshSettings, RadiosityMesh, build_mesh, hide_receivers
+from raytrad.core.pairs import receiver_points
 from raytrad.core.repair import repair_scene
 from raytrad.core.solver import SolveResult, SolveSettings, check_solvable, filled_capture
 from raytrad.core.visibility import Occluder, nothing_can_occlude

@@ -12,7 +12,10 @@ import logging
 import math
 import os
 import threading
-from concurrent.futures import ThreadPoolExecutor
+from collections import deque
+from collections.abc import Callable, Iterable, Iterator
+from concurrent.futures import Executor, ThreadPoolExecutor
+from typing import TypeVar
 
 import numpy as np
 
@@ -48,6 +51,9 @@ COVER_SHARE = 0.2
 #: each job's process so that jobs running side by side share the cores).
 THREADS_VARIABLE = "RAYTRAD_THREADS"
 
+_T = TypeVar("_T")
+_R = TypeVar("_R")
+
 
 def worker_count() -> int:
     """Threads for ray batches and the form-factor pass: every core the process may use,
@@ -60,6 +66,33 @@ def worker_count() -> int:
     if text.isascii() and text.isdigit() and int(text) >= 1:
         return min(cores, int(text))
     return cores
+
+
+def ordered_map(
+    pool: Executor, work: Callable[[_T], _R], items: Iterable[_T], ahead: int
+) -> Iterator[_R]:
+    """``work(item)`` for each item on ``pool``, yielded in order, with at most ``ahead``
+    items submitted beyond the one yielded (``Executor.map`` submits them all, so results
+    pile up in memory while the caller is busy). Closing the iterator cancels the items
+    not started.
+
+    Parameters
+    ----------
+    pool : concurrent.futures.Executor
+    work : callable
+    items : iterable
+    ahead : int, >= 1
+    """
+    todo = iter(items)
+    pending = deque(pool.submit(work, item) for item in itertools.islice(todo, max(1, ahead)))
+    try:
+        while pending:
+            result = pending.popleft().result()
+            pending.extend(pool.submit(work, item) for item in itertools.islice(todo, 1))
+            yield result
+    finally:
+        for future in pending:
+            future.cancel()
 
 
 class Occluder:

@@ -9,7 +9,7 @@ A receiver exactly *on* an edge, or inside a triangle in its plane, is not among
 there Lambert's formula is singular (the edge's plane through the receiver is undefined,
 and the factor's limit depends on the side approached from), so both implementations
 return a rounding-dependent value in [0, 1]. Receivers never sit there: their evaluation
-points move into their own triangles (:func:`raytrad.core.formfactor.receiver_points`).
+points move into their own triangles (:func:`raytrad.core.pairs.receiver_points`).
 """
 
 from __future__ import annotations

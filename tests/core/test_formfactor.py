@@ -15,8 +15,9 @@ import numpy as np
 import pytest
 
 from raytrad.core import compiled
-from raytrad.core.formfactor import FormFactorEngine, receiver_points
+from raytrad.core.formfactor import FormFactorEngine
 from raytrad.core.mesh import MeshSettings, RadiosityMesh, build_mesh
+from raytrad.core.pairs import receiver_points
 from raytrad.core.pathtrace import path_traced_radiosity
 from raytrad.core.pipeline import Prepared
 from raytrad.core.solver import SolveResult, SolveSettings, solve
@@ -534,3 +535,47 @@ def test_columns_beyond_the_cache_are_spilled_not_retraced(cornell: Prepared) ->
     finally:
         tiny.close()
     assert folder and not os.path.exists(folder)  # the spill files go with the engine
+
+
+def test_balancing_without_a_cache_holds_the_columns_once(cornell: Prepared) -> None:
+    """With no cache (``cache_bytes=0``: nothing kept, nothing spilled), balancing keeps the
+    pass's columns for its sweeps instead of tracing them again each round, and balances
+    them as the cached engine does."""
+    bare = FormFactorEngine(cornell.mesh, cornell.occluder, cache_bytes=0)
+    try:
+        bare.balance(cornell.closed_receivers)
+        assert bare.columns_computed == cornell.mesh.patch_count
+        assert not bare._cache and not len(bare._spill)
+        np.testing.assert_array_equal(bare._col_scale, cornell.engine._col_scale)
+        np.testing.assert_array_equal(bare.row_sums(), cornell.engine.row_sums())
+    finally:
+        bare.close()
+
+
+def test_released_columns_are_computed_again_alike(cornell: Prepared) -> None:
+    """Once the solve is done a render drops the cache and the spill files
+    (``release_columns``); a column asked for later is traced again and equals the one
+    released. A pass cut short keeps its columns (its checkpoint needs them)."""
+    engine = FormFactorEngine(cornell.mesh, cornell.occluder, cache_bytes=200_000)
+    cut = FormFactorEngine(cornell.mesh, cornell.occluder)
+    try:
+        engine.balance(cornell.closed_receivers)
+        assert engine._cache and len(engine._spill)
+        before = [engine.column(p) for p in (0, cornell.mesh.patch_count - 1)]
+        computed, folder = engine.columns_computed, engine._spill.folder
+        engine.release_columns()
+        assert not engine._cache and not len(engine._spill) and engine._cached_bytes == 0
+        assert folder and not os.path.exists(folder)
+        for patch, old in zip((0, cornell.mesh.patch_count - 1), before, strict=True):
+            new = engine.column(patch)
+            np.testing.assert_array_equal(new.receivers, old.receivers)
+            np.testing.assert_array_equal(new.factors, old.factors)
+        assert engine.columns_computed == computed + 2
+        cut.balance(cornell.closed_receivers, stop=lambda: True)
+        assert not cut.complete
+        kept = len(cut._cache)
+        cut.release_columns()
+        assert kept and len(cut._cache) == kept
+    finally:
+        engine.close()
+        cut.close()

@@ -16,13 +16,13 @@ import numpy as np
 import pytest
 
 from raytrad.core import compiled
-from raytrad.core.formfactor import receiver_points
 from raytrad.core.gather import (
     GatherWeights,
     numpy_sum_shares,
     sum_shares,
 )
 from raytrad.core.kernels import linear_corner_shares, numpy_polygon_form_factor
+from raytrad.core.pairs import receiver_points
 from raytrad.core.pipeline import Prepared
 from raytrad.core.solver import SolveResult, SolveSettings, solve
 from raytrad.core.spread import corner_form_factors
@@ -187,3 +187,24 @@ def test_gathered_sums_each_near_receivers_shares(compact: bool) -> None:
     )
     np.testing.assert_allclose(gather.numpy_gathered(radiosity), want, rtol=1e-14, atol=0)
     np.testing.assert_array_equal(gather.gathered(radiosity), gather.numpy_gathered(radiosity))
+
+
+def test_means_of_the_nodes_a_gather_reads(cornell: Prepared) -> None:
+    """``SubareaMeans.extend`` over only the nodes a gather reads (as refinement's final
+    gather asks, not every node of a million-receiver mesh) gives those nodes' means
+    exactly as over all nodes, each an area-weighted mean checked directly here."""
+    means = cornell.engine.subarea_means
+    rng = np.random.default_rng(3)
+    radiosity = rng.uniform(0.0, 5.0, size=(means.base, 3))
+    whole = means.extend(radiosity)
+    count = len(means.pointer) - 1
+    nodes = np.unique(rng.integers(0, count, size=50))
+    some = means.extend(radiosity, nodes)
+    np.testing.assert_array_equal(some[: means.base], radiosity)
+    np.testing.assert_array_equal(some[means.base + nodes], whole[means.base + nodes])
+    others = np.setdiff1d(np.arange(count), nodes)
+    assert not some[means.base + others].any()
+    for node in nodes[:5]:
+        a, b = means.pointer[node], means.pointer[node + 1]
+        expected = means.shares[a:b] @ radiosity[means.receivers[a:b]]
+        np.testing.assert_allclose(whole[means.base + node], expected, rtol=1e-12)

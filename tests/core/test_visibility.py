@@ -106,3 +106,38 @@ def test_the_ceiling_beside_the_cornell_lamp_has_no_dark_rim(
         )
     print("ceiling beside the lamp's z and x edges, bake / gather at 2, 5, 10 mm:", rows)
     np.testing.assert_allclose(rows, 1.0, atol=0.1)
+
+
+def test_ordered_map_keeps_order_and_bounds_what_runs_ahead() -> None:
+    """Results come in the items' order whatever order they finish in; no more than
+    ``ahead`` items are submitted beyond the one being taken, however long the caller takes
+    over each; closing the iterator cancels the rest."""
+    import threading
+    import time
+    from concurrent.futures import ThreadPoolExecutor
+
+    from raytrad.core.visibility import ordered_map
+
+    started: list[int] = []
+    lock = threading.Lock()
+
+    def work(item: int) -> int:
+        with lock:
+            started.append(item)
+        time.sleep(0.002 * (item % 3))  # finish out of order
+        return item * item
+
+    with ThreadPoolExecutor(2) as pool:
+        results = ordered_map(pool, work, range(12), ahead=3)
+        taken = []
+        for value in results:
+            taken.append(value)
+            time.sleep(0.01)  # a slow caller: the workers must not run on
+            with lock:
+                assert len(started) <= len(taken) + 3
+        assert taken == [i * i for i in range(12)]
+        started.clear()
+        cut = ordered_map(pool, work, range(100), ahead=2)
+        assert next(cut) == 0
+        cut.close()
+    assert len(started) <= 3
