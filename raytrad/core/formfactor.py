@@ -58,9 +58,11 @@ _T = TypeVar("_T")
 ROW_FIX_LIMIT = 0.25
 #: Row sums of an occlusion-free scene within this of 1 count as closed (exact factors).
 EXACT_ROW_SUM = 1e-6
-#: Columns a worker may have computed or under way beyond the one the pass is taking: two
-#: keep every core busy, and a million-receiver column with its gather weights can take
-#: 60 MB, so that the pass's memory stays bounded while a checkpoint is written.
+#: Columns a worker may have computed or under way beyond the one the pass is taking, so
+#: that the pass's memory stays bounded while a checkpoint is written (a million-receiver
+#: column with its gather weights can take 60 MB). A slow column can still leave a core
+#: idle behind it; with two, the pass took the time it took unbounded (2026-12-02: 508.8
+#: against 506.8 s at a million receivers; the default render's pass within noise).
 AHEAD_PER_WORKER = 2
 
 
