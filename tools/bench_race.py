@@ -1,7 +1,8 @@
-"""Race raytrad against Blender's Cycles baker on the Cornell box, on the CPU: the time each
-needs to reach both 1 % worst-surface mean error and 2 % point-wise RMS.
+"""Race raytrad against Blender's Cycles baker and against Mitsuba 3 on the Cornell box, on
+the CPU: the time each needs to reach both 1 % worst-surface mean error and 2 % point-wise
+RMS; and check the race's reference against Mitsuba's path tracer.
 
-Both renderers are measured in one run, at the same probe points and against the same
+The renderers are measured in one run, at the same probe points and against the same
 cached path-traced reference as ``tools/bench_accuracy.py`` (its area and contact probes,
 ``--per-quad``/``--along``/``--paths``/``--cache`` with the same defaults, so the two tools
 share one cache), with its error definitions (:func:`bench_accuracy.report`):
@@ -30,30 +31,54 @@ texel, into one float image texture: a lightmap atlas with one tile per quad (ea
 two triangles mapped affinely onto a rectangle of its edges' lengths at ``--texel``
 metres per texel, 2 texels of gutter filled by Blender's bake margin). An image rather than
 vertex colours since a lightmap is what both produce, and because a texel is sampled over
-its own footprint with no subdivision of the mesh. The texture's discretisation (each
-texel averages its footprint, probes interpolate between texel centres) puts a floor under
-Cycles' point RMS, about 1.7 % at ``--texel 0.005`` (78 000 texels; fitted as
+its own footprint with no subdivision of the mesh. The probes read the texture
+bilinearly at their UVs (found from their triangle's barycentric coordinates), times pi.
+
+Both lightmaps are finished alike (``tools/race_atlas.py``): texels whose centre no one
+sees (most of 16 rays from it hit the back of a surface: the floor under a block, the
+ceiling behind the light) are filled from their seen neighbours, a ring at a time, and
+the gutters extended again. Read as baked, those dark texels bleed a texel onto the lit
+surface beside them: point-sampled texels (Mitsuba's) then level off near 2.1 % RMS at
+5 mm and 2.5 mm alike. The texture's discretisation (each texel averages its footprint,
+probes interpolate between texel centres) still puts a floor under Cycles' point RMS,
+about 1.7 % at ``--texel 0.005`` before the fill (78 000 texels; fitted as
 ``RMS^2 = noise^2 / spp + floor^2`` over 64-1 024 spp), some 2.5 % at 10 mm (never under
 2 %) and 0.9 % at 2.5 mm (four times the texels, so four times the time per spp): 5 mm is
-about Cycles' fastest way to 2 %. The probes read the texture bilinearly at their UVs
-(found from their triangle's barycentric coordinates), times pi. A Cycles row's seconds are the
-wall time of the bake call (``bpy.ops.object.bake``: Cycles' scene sync, BVH build and
-sampling); building the Blender scene (mesh, materials, image) is timed once, apart
-(``setup``), and not counted in the race. A 1-spp warm-up bake precedes the timed ones.
+about Cycles' fastest way to 2 %. A Cycles row's seconds are the wall time of the bake
+call (``bpy.ops.object.bake``: Cycles' scene sync, BVH build and sampling) plus finding
+the hidden texels and the fill; building the Blender scene (mesh, materials, image) is
+timed once, apart (``setup``), and not counted in the race. A 1-spp warm-up bake precedes
+the timed ones.
 
-Units check (printed): the light's mean radiosity from Cycles against the reference's
-(emission plus its reflected irradiance) and against its emitted exitance, and every
-surface's mean ratio Cycles / reference at the largest ``--spp``.
+Mitsuba 3 (pip ``mitsuba`` with Debian's ``libllvm19``, its ``llvm_ad_rgb`` variant; a
+benchmark dependency, never a runtime one; see ``tools/mitsuba_bake.py``) has no baker:
+it fills an atlas laid out as Cycles' (``--mitsuba-texel``, 5 mm as Cycles' by default),
+each seen tile texel with the radiosity path traced at the texel's centre
+(``--mitsuba-spp`` paths, each an emitter sample and a cosine-weighted path by Mitsuba's
+``path`` integrator), on ``--threads`` threads. A row's seconds are the estimate, the
+image, finding the hidden texels and the fill; building the Mitsuba scene is ``setup``. A
+1-spp warm-up (Dr.Jit compiles its kernels) precedes the timed rows.
+
+Second reference (printed unless ``--mitsuba-reference 0``): Mitsuba at the probes
+themselves against the cached reference, which raytrad's own path tracer
+(:func:`raytrad.core.pathtrace.path_traced_radiosity`) makes: every surface's mean ratio
+and the RMS of their difference over the two standard errors combined (about 1 where
+they agree to within their noise).
+
+Units check (printed): each renderer's mean radiosity on the light against the
+reference's (emission plus its reflected irradiance) and its emitted exitance, and every
+surface's mean ratio renderer / reference at its largest samples.
 
     python -m pip install --no-deps 'bpy>=4.2' requests zstandard
-    python tools/bench_race.py                        # 2k-20k receivers, 16-1024 spp
-    python tools/bench_race.py --receivers 5000 --spp 64 256 --threads 2 --verbose
+    python -m pip install mitsuba && apt install libllvm19
+    python tools/bench_race.py                 # 2k-20k receivers, 16-1024 spp
+    python tools/bench_race.py --against mitsuba --receivers 5000 --mitsuba-spp 64 256
 
 (``--no-deps``: bpy 5.0's wheel pins NumPy 1.x, which raytrad's other dependencies have
 outgrown; with NumPy 2 everything but Blender's audio module loads, and the race needs
 no audio.)
 
-Exits with status 2 and one line if ``bpy`` cannot be imported.
+Exits with status 2 and one line if a renderer ``--against`` names cannot be loaded.
 """
 
 from __future__ import annotations
@@ -81,16 +106,16 @@ from bench_accuracy import (
     area_probes,
     bake,
     contact_probes,
-    quad_corners,
     reference,
     report,
     shut_in,
 )
+from mitsuba_bake import VARIANT, import_mitsuba, irradiance_at, mitsuba_scene
+from race_atlas import GUTTER, Atlas, Texels, atlas, bilinear, finish, probe_uv, tile_texels
 
 from raytrad.products.probe import radiosity_at
 from raytrad.scene import Scene, triangle_areas_normals
 from raytrad.scene.builtin import cornell_box
-from raytrad.scene.model import barycentric_coordinates
 
 #: How to install Blender's module beside raytrad (see the module docstring).
 BPY_INSTALL = "pip install --no-deps 'bpy>=4.2' requests zstandard"
@@ -100,8 +125,6 @@ POINT_RMS_TARGET = 0.02
 #: The :func:`bench_accuracy.report` keys of the two errors.
 WORST_KEY = "worst surface"
 RMS_KEY = "point RMS, reference noise removed"
-#: Texels of gutter around each atlas tile, filled by Blender's bake margin.
-GUTTER = 2
 #: Receivers of raytrad's warm-up bake (numba compilation), samples of Cycles'.
 WARM_RECEIVERS = 1000
 WARM_SPP = 1
@@ -122,16 +145,6 @@ class Row:
     @property
     def meets(self) -> bool:
         return self.worst <= WORST_SURFACE_TARGET and self.rms <= POINT_RMS_TARGET
-
-
-@dataclass
-class Atlas:
-    """A lightmap layout: (T, 3, 2) UVs per triangle corner in [0, 1] (v up, Blender's
-    convention), and the image's size in texels."""
-
-    uv: np.ndarray
-    width: int
-    height: int
 
 
 @contextlib.contextmanager
@@ -164,57 +177,6 @@ def import_bpy() -> ModuleType | None:
     except ImportError:
         return None
     return bpy
-
-
-def atlas(scene: Scene, texel: float, gutter: int = GUTTER) -> Atlas:
-    """One rectangular tile per quad (corners 0-1-2-3, triangles 0-1-2 and 0-2-3), of
-    ``|c1 - c0|`` by ``|c3 - c0|`` at ``texel`` [m] per texel, shelf-packed with ``gutter``
-    texels around each. Each triangle maps affinely onto half its tile, so the map is
-    continuous across the diagonal and the texel density uniform on parallelograms."""
-    corners = quad_corners(scene)
-    size = np.ceil(np.linalg.norm(corners[:, [1, 3]] - corners[:, [0]], axis=2) / texel).astype(int)
-    padded = size + 2 * gutter
-    width = max(int(np.ceil(1.1 * np.sqrt(np.prod(padded, axis=1).sum()))), padded[:, 0].max())
-    origin = np.zeros_like(size)
-    x = y = shelf = 0
-    for q in np.argsort(-padded[:, 1], kind="stable"):
-        if x + padded[q, 0] > width:
-            x, y, shelf = 0, y + shelf, 0
-        origin[q] = (x + gutter, y + gutter)
-        x, shelf = x + padded[q, 0], max(shelf, padded[q, 1])
-    height = y + shelf
-    unit = np.array([[0, 0], [1, 0], [1, 1], [0, 1]])
-    tile = origin[:, None] + unit[None] * size[:, None]  # (Q, 4, 2) texels
-    uv = np.empty((2 * len(corners), 3, 2))
-    uv[0::2], uv[1::2] = tile[:, [0, 1, 2]], tile[:, [0, 2, 3]]
-    return Atlas(uv / [width, height], int(width), int(height))
-
-
-def probe_uv(scene: Scene, layout: Atlas, probes: Probes) -> np.ndarray:
-    """(N, 2) UVs of the probes: each lies in its quad's plane; of the quad's two triangles
-    the one it is inside (the larger least barycentric coordinate) maps it."""
-    corners = scene.triangle_vertices()
-    both = [2 * probes.quad, 2 * probes.quad + 1]
-    bary = [barycentric_coordinates(probes.points, corners[t]) for t in both]
-    second = bary[1].min(axis=1) > bary[0].min(axis=1)
-    triangle = np.where(second, both[1], both[0])
-    weights = np.where(second[:, None], bary[1], bary[0])
-    return np.einsum("ij,ijk->ik", weights, layout.uv[triangle])
-
-
-def bilinear(image: np.ndarray, uv: np.ndarray) -> np.ndarray:
-    """(N, C) values of ``image`` (H, W, C), row 0 at v = 0, at ``uv`` (N, 2), bilinear
-    between texel centres (clamped at the border) as a GPU samples a lightmap."""
-    height, width = image.shape[:2]
-    xy = uv * [width, height] - 0.5
-    low = np.floor(xy).astype(int)
-    frac = xy - low
-    x0, y0 = np.clip(low[:, 0], 0, width - 1), np.clip(low[:, 1], 0, height - 1)
-    x1, y1 = np.clip(low[:, 0] + 1, 0, width - 1), np.clip(low[:, 1] + 1, 0, height - 1)
-    fx, fy = frac[:, :1], frac[:, 1:]
-    return (1 - fy) * ((1 - fx) * image[y0, x0] + fx * image[y0, x1]) + fy * (
-        (1 - fx) * image[y1, x0] + fx * image[y1, x1]
-    )
 
 
 def _material(bpy: ModuleType, name: str, rho: np.ndarray, exitance: np.ndarray, image: object):
@@ -351,15 +313,93 @@ def race_cycles(
     image = blender_scene(bpy, scene, layout, args.threads)
     setup = time.perf_counter() - start
     uv = probe_uv(scene, layout, probes)
+    texels, hiding = timed_texels(scene, layout)
     cycles_bake(bpy, image, WARM_SPP)
     rows = []
     for spp in args.spp:
         radiosity, seconds = cycles_bake(bpy, image, spp)
+        start = time.perf_counter()
+        finish(radiosity, texels, GUTTER, layout)
+        seconds += time.perf_counter() - start + hiding
         got = bilinear(radiosity, uv)
         name = f"{spp} spp"
         rows.append(Row(name, seconds, *errors(got, truth, args.verbose, name), got, setup))
         print(f"  Cycles {name}: {seconds:.1f} s", flush=True)
     return rows, layout
+
+
+def race_mitsuba(
+    mi: ModuleType, dr: ModuleType, scene: Scene, args: argparse.Namespace, truth: tuple
+) -> tuple[list[Row], Atlas]:
+    """Mitsuba at each samples per texel, into an atlas laid out as Cycles' (at
+    ``--mitsuba-texel``), after a warm-up (Dr.Jit compiles its kernels): each seen tile
+    texel's centre gets the radiosity :func:`mitsuba_bake.irradiance_at` estimates there,
+    the image is finished as Cycles' (:func:`race_atlas.finish`) and the probes read it.
+    A row's seconds are the estimate, the image and finding the hidden texels; setup is
+    building the Mitsuba scene, once."""
+    probes = truth[2]
+    start = time.perf_counter()
+    target = mitsuba_scene(mi, scene)
+    setup = time.perf_counter() - start
+    layout = atlas(scene, args.mitsuba_texel)
+    texels, hiding = timed_texels(scene, layout)
+    seen = texels.visible
+    material = scene.material_index[2 * texels.quads[seen]]
+    rho = scene.material_reflectance[material]
+    emitted = scene.material_emitted_exitance[material]
+    points, normals, texel = texels.points[seen], texels.normals[seen], texels.texel[seen]
+    uv = probe_uv(scene, layout, probes)
+    irradiance_at(mi, dr, target, points, normals, WARM_SPP)
+    rows = []
+    for spp in args.mitsuba_spp:
+        start = time.perf_counter()
+        irradiance, _ = irradiance_at(mi, dr, target, points, normals, spp, seed=spp)
+        image = np.zeros((layout.height, layout.width, 3))
+        image[texel[:, 1], texel[:, 0]] = emitted + rho * irradiance
+        finish(image, texels, GUTTER, layout)
+        seconds = time.perf_counter() - start + hiding
+        got = bilinear(image, uv)
+        name = f"{spp} spp"
+        rows.append(Row(name, seconds, *errors(got, truth, args.verbose, name), got, setup))
+        print(f"  Mitsuba {name}: {seconds:.1f} s", flush=True)
+    return rows, layout
+
+
+def timed_texels(scene: Scene, layout: Atlas) -> tuple[Texels, float]:
+    """:func:`race_atlas.tile_texels` and its wall time [s]."""
+    start = time.perf_counter()
+    texels = tile_texels(scene, layout)
+    return texels, time.perf_counter() - start
+
+
+def check_reference(mi: ModuleType, dr: ModuleType, scene: Scene, truth: tuple, spp: int) -> None:
+    """Mitsuba at the probes themselves (``spp`` samples each) against the race's
+    path-traced reference: every surface's mean ratio, and the RMS over the probes of
+    their difference in units of the two standard errors combined (about 1 when they
+    agree to within their noise)."""
+    ref, ref_error, probes, _ = truth
+    owner = scene.material_index[2 * probes.quad]
+    start = time.perf_counter()
+    target = mitsuba_scene(mi, scene)
+    irradiance, error = irradiance_at(mi, dr, target, probes.points, probes.normals, spp, seed=1)
+    rho = scene.material_reflectance[owner]
+    got = scene.material_emitted_exitance[owner] + rho * irradiance
+    seconds = time.perf_counter() - start
+    area = np.isinf(probes.contact) & ~probes.shut
+    print(f"\nsecond reference: Mitsuba at the probes, {spp} samples each ({seconds:.1f} s)")
+    ratios = [
+        f"{surface} {np.round(got[rows].mean(0) / ref[rows].mean(0), 4)}"
+        for q, surface in enumerate(CORNELL_SURFACES)
+        if (rows := area & (probes.quad == q)).any()
+    ]
+    print("  Mitsuba / reference means: " + "; ".join(ratios))
+    spread = np.sqrt(ref_error**2 + (rho * error) ** 2)
+    seen = (spread > 0).all(axis=1) & ~probes.shut
+    z = (got[seen] - ref[seen]) / spread[seen]
+    print(
+        f"  difference / combined standard error, RMS over {seen.sum()} probes (RGB): "
+        f"{np.round(np.sqrt((z**2).mean(0)), 3)}"
+    )
 
 
 def print_table(title: str, rows: list[Row]) -> None:
@@ -376,24 +416,24 @@ def print_table(title: str, rows: list[Row]) -> None:
         print(line + f" {100 * row.worst:13.2f}% {100 * row.rms:9.2f}%  {verdict}")
 
 
-def print_units(cycles: Row, truth: tuple, scene: Scene) -> None:
-    """The light's mean radiosity (Cycles, reference, emitted exitance) and every surface's
-    mean ratio Cycles / reference, per channel."""
+def print_units(label: str, row: Row, truth: tuple, scene: Scene) -> None:
+    """The light's mean radiosity (``label``'s, the reference's, the emitted exitance) and
+    every surface's mean ratio ``label`` / reference, per channel."""
     ref, _, probes, _ = truth
     area = np.isinf(probes.contact) & ~probes.shut
     light = area & (probes.quad == LIGHT)
     emitted = scene.emitted_exitance[2 * LIGHT]
-    print(f"\nunits check at {cycles.setting} (radiosity [W m-2], RGB):")
+    print(f"\nunits check, {label} at {row.setting} (radiosity [W m-2], RGB):")
     print(
-        f"  light: Cycles {np.round(cycles.got[light].mean(0), 2)}, reference "
+        f"  light: {label} {np.round(row.got[light].mean(0), 2)}, reference "
         f"{np.round(ref[light].mean(0), 2)}, emitted exitance {np.round(emitted, 2)}"
     )
     ratios = [
-        f"{surface} {np.round(cycles.got[rows].mean(0) / ref[rows].mean(0), 3)}"
+        f"{surface} {np.round(row.got[rows].mean(0) / ref[rows].mean(0), 3)}"
         for q, surface in enumerate(CORNELL_SURFACES)
         if (rows := area & (probes.quad == q)).any()
     ]
-    print("  Cycles / reference means: " + "; ".join(ratios))
+    print(f"  {label} / reference means: " + "; ".join(ratios))
 
 
 def first_meeting(rows: list[Row]) -> Row | None:
@@ -401,19 +441,23 @@ def first_meeting(rows: list[Row]) -> Row | None:
     return next((row for row in rows if row.meets), None)
 
 
-def print_race(ours: list[Row], theirs: list[Row]) -> None:
-    """The first setting of each meeting both targets and the ratio of their times."""
-    mine, cycles = first_meeting(ours), first_meeting(theirs)
+def print_race(ours: list[Row], others: dict[str, list[Row]]) -> None:
+    """The first setting of each renderer meeting both targets and each other renderer's
+    time over raytrad's."""
+    mine = first_meeting(ours)
     targets = f"worst surface <= {100 * WORST_SURFACE_TARGET:g} % and point RMS "
     targets += f"<= {100 * POINT_RMS_TARGET:g} %"
     print(f"\nrace to {targets}:")
-    for label, row in (("raytrad", mine), ("Cycles", cycles)):
+    for label, row in (("raytrad", mine), *((k, first_meeting(v)) for k, v in others.items())):
         print(f"  {label:8s} " + (f"{row.setting}, {row.seconds:.1f} s" if row else "never"))
-    if mine and cycles:
-        print(f"  Cycles / raytrad time: {cycles.seconds / mine.seconds:.2f}")
-    elif mine:
-        slowest = max(row.seconds for row in theirs)
-        print(f"  Cycles / raytrad time: > {slowest / mine.seconds:.2f} (Cycles never met both)")
+    for label, rows in others.items():
+        theirs = first_meeting(rows)
+        if mine and theirs:
+            print(f"  {label} / raytrad time: {theirs.seconds / mine.seconds:.2f}")
+        elif mine:
+            slowest = max(row.seconds for row in rows)
+            ratio = slowest / mine.seconds
+            print(f"  {label} / raytrad time: > {ratio:.2f} ({label} never met both)")
 
 
 def probe_set(scene: Scene, per_quad: int, along: int) -> Probes:
@@ -442,8 +486,31 @@ def main(argv: list[str] | None = None) -> int:
         default=[16, 64, 256, 512, 1024],
         help="Cycles' samples per texel, in the order raced",
     )
-    parser.add_argument("--threads", type=int, default=2, help="Cycles' CPU threads")
+    parser.add_argument(
+        "--mitsuba-spp",
+        type=int,
+        nargs="+",
+        default=[16, 64, 256, 512, 1024],
+        help="Mitsuba's samples per texel, in the order raced",
+    )
+    parser.add_argument(
+        "--mitsuba-reference",
+        type=int,
+        default=4096,
+        help="Mitsuba's samples per probe for the second reference (0: none)",
+    )
+    parser.add_argument(
+        "--against",
+        nargs="+",
+        choices=("cycles", "mitsuba"),
+        default=["cycles", "mitsuba"],
+        help="the renderers raytrad races",
+    )
+    parser.add_argument("--threads", type=int, default=2, help="Cycles' and Mitsuba's threads")
     parser.add_argument("--texel", type=float, default=0.005, help="Cycles' texel size [m]")
+    parser.add_argument(
+        "--mitsuba-texel", type=float, default=0.005, help="Mitsuba's texel size [m]"
+    )
     parser.add_argument("--per-quad", type=int, default=256, help="area probes per quad")
     parser.add_argument("--along", type=int, default=8, help="contact probes along a line")
     parser.add_argument("--paths", type=int, default=20000, help="reference paths per point")
@@ -455,11 +522,10 @@ def main(argv: list[str] | None = None) -> int:
     )
     parser.add_argument("--verbose", action="store_true", help="every surface's error")
     args = parser.parse_args(argv)
-    bpy = import_bpy()
-    if bpy is None:
-        print(f"bench_race: bpy is not importable; install it: {BPY_INSTALL}", file=sys.stderr)
+    renderers = load_renderers(args)
+    if isinstance(renderers, str):
+        print(f"bench_race: {renderers}", file=sys.stderr)
         return 2
-    print(f"Blender {bpy.app.version_string}, Cycles on the CPU with {args.threads} threads")
     scene = cornell_box()
     probes = probe_set(scene, args.per_quad, args.along)
     ref, ref_error = reference(scene, probes, args.paths, args.cache)
@@ -467,18 +533,58 @@ def main(argv: list[str] | None = None) -> int:
     triangle_area = triangle_areas_normals(scene.triangle_vertices())[0]
     truth = (ref, ref_error, probes, triangle_area[0::2] + triangle_area[1::2])
     ours = race_raytrad(scene, args.receivers, truth, args.verbose)
-    theirs, layout = race_cycles(bpy, scene, args, truth)
+    others = {}
+    tables = []
+    if "cycles" in renderers:
+        others["Cycles"], layout = race_cycles(renderers["cycles"], scene, args, truth)
+        tables.append(
+            f"Cycles ({layout.width} x {layout.height} atlas, {args.texel * 1000:g} mm texels; "
+            "seconds: the bake call, hidden texels and fill; setup: the Blender scene, once)"
+        )
+    if "mitsuba" in renderers:
+        mi, dr = renderers["mitsuba"]
+        others["Mitsuba"], layout = race_mitsuba(mi, dr, scene, args, truth)
+        tables.append(
+            f"Mitsuba ({layout.width} x {layout.height} atlas, "
+            f"{args.mitsuba_texel * 1000:g} mm texels, "
+            "a path per texel centre and sample; seconds: the estimate, the image, hidden "
+            "texels and fill; setup: the Mitsuba scene, once)"
+        )
     print_table(
         "raytrad (seconds: whole bake: mesh, form factors, solve, refinement; numba warm)", ours
     )
-    print_table(
-        f"Cycles ({layout.width} x {layout.height} atlas, {args.texel * 1000:g} mm texels; "
-        "seconds: the bake call; setup: building the Blender scene, once)",
-        theirs,
-    )
-    print_units(theirs[-1], truth, scene)
-    print_race(ours, theirs)
+    for title, rows in zip(tables, others.values(), strict=True):
+        print_table(title, rows)
+    for label, rows in others.items():
+        print_units(label, rows[-1], truth, scene)
+    if "mitsuba" in renderers and args.mitsuba_reference > 0:
+        check_reference(*renderers["mitsuba"], scene, truth, args.mitsuba_reference)
+    print_race(ours, others)
     return 0
+
+
+def load_renderers(args: argparse.Namespace) -> dict | str:
+    """The renderers ``args.against`` names, imported (``cycles``: ``bpy``; ``mitsuba``:
+    Mitsuba and Dr.Jit), with their versions printed; or one line saying which is
+    missing and how to install it."""
+    renderers: dict = {}
+    if "cycles" in args.against:
+        bpy = import_bpy()
+        if bpy is None:
+            return f"bpy is not importable; install it: {BPY_INSTALL}"
+        print(f"Blender {bpy.app.version_string}, Cycles on the CPU with {args.threads} threads")
+        renderers["cycles"] = bpy
+    if "mitsuba" in args.against:
+        loaded = import_mitsuba(args.threads)
+        if isinstance(loaded, str):
+            return loaded
+        mi, dr = loaded
+        print(
+            f"Mitsuba {mi.__version__} ({VARIANT}, Dr.Jit {dr.__version__}, "
+            f"{os.environ['DRJIT_LIBLLVM_PATH']}) on the CPU with {args.threads} threads"
+        )
+        renderers["mitsuba"] = loaded
+    return renderers
 
 
 if __name__ == "__main__":
