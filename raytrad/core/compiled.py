@@ -14,13 +14,17 @@ keep the numpy implementations as the reference: every function here computes th
 formula in the same order, and the tests compare the two to 1e-12 on random and
 adversarial pairs (grazing, coplanar, straddling the horizon).
 numba is imported only when a kernel is first asked for (:func:`get`), and
-``RAYTRAD_KERNELS=numpy`` in the environment keeps the numpy path.
+``RAYTRAD_KERNELS=numpy`` in the environment keeps the numpy path. The first time (numba's
+cache lacks them) the kernels a render calls compile on every core at once
+(:func:`_compile_ahead`; ``RAYTRAD_COMPILERS`` processes).
 """
 
 from __future__ import annotations
 
 import logging
 import os
+import subprocess
+import sys
 import threading
 import time
 from types import SimpleNamespace
@@ -30,6 +34,10 @@ log = logging.getLogger(__name__)
 
 _LOCK = threading.Lock()
 _STATE: dict[str, Any] = {}
+#: The most processes that compile the kernels at once the first time (:func:`compilers`).
+MAX_COMPILERS = 8
+#: Seconds to wait for a helper compiling kernels before leaving them to numba [s].
+HELPER_TIMEOUT = 300.0
 
 
 def wanted() -> bool:
@@ -59,6 +67,16 @@ def _build() -> SimpleNamespace | None:
     except ImportError:  # pragma: no cover - numba is a dependency
         log.warning("numba is not installed: form factors use the slower numpy kernels")
         return None
+    kernels = _dispatchers(numba)
+    _compile_ahead(numba, kernels)
+    log.debug("compiled kernels ready in %.2f s", time.perf_counter() - start)
+    return SimpleNamespace(**kernels)
+
+
+def _dispatchers(numba: Any) -> dict[str, Any]:
+    """Every loop of the ``_compiled_*`` modules wrapped by :func:`_jit` (once; rebound in
+    its module, helpers first, so that the kernels call each other compiled), by name.
+    numba compiles each on its first call, or loads it from its cache."""
     from raytrad.core import (
         _compiled_gather,
         _compiled_kernels,
@@ -80,8 +98,148 @@ def _build() -> SimpleNamespace | None:
             if not hasattr(getattr(loops, name), "py_func"):  # not compiled yet
                 setattr(loops, name, _jit(numba, getattr(loops, name)))
             kernels[name] = getattr(loops, name)
-    log.debug("compiled kernels ready in %.2f s", time.perf_counter() - start)
-    return SimpleNamespace(**kernels)
+    return kernels
+
+
+def compilers() -> int:
+    """Processes that compile the kernels at once the first time (:func:`_compile_ahead`):
+    ``RAYTRAD_COMPILERS`` in the environment, else this process's cores, at most
+    :data:`MAX_COMPILERS`; 1 compiles each kernel lazily in this process only."""
+    text = os.environ.get("RAYTRAD_COMPILERS", "").strip()
+    if text:
+        try:
+            return max(1, int(text))
+        except ValueError:
+            log.warning("RAYTRAD_COMPILERS=%r is not a whole number: using 1", text)
+            return 1
+    try:
+        cores = len(os.sched_getaffinity(0))
+    except AttributeError:  # pragma: no cover - not on Linux
+        cores = os.cpu_count() or 1
+    return min(cores, MAX_COMPILERS)
+
+
+def _compile_ahead(numba: Any, kernels: dict[str, Any]) -> None:
+    """Compile the kernels a render calls on every core at once, the first time.
+
+    numba compiles a kernel on its first call, one after another, in numba's own front
+    end (Python: about 18 s for a default render's kernels, 0.2-1.5 s each). When its
+    cache lacks some of the kernels and signatures a render calls
+    (:data:`raytrad.core._kernel_signatures.SIGNATURES`), they are shared out by their
+    measured compile times among :func:`compilers` processes: this one compiles its share,
+    the others (``python -m raytrad.core.compiled NAME ...``) theirs into numba's cache,
+    from which this process then loads them. Anything that goes wrong (no cache, a helper
+    that fails or takes over :data:`HELPER_TIMEOUT`) leaves numba compiling lazily, as
+    without this.
+    """
+    from raytrad.core._kernel_signatures import SECONDS, SIGNATURES
+
+    workers = compilers()
+    if workers < 2:
+        return
+    listed = [name for name in SIGNATURES if name in kernels]
+    cold = [name for name in listed if not _cached(numba, kernels[name], SIGNATURES[name])]
+    workers = min(workers, len(cold))
+    if workers < 2:
+        return
+    start = time.perf_counter()
+    groups = share_out(cold, workers, SECONDS)
+    helpers = [_spawn(group) for group in groups[1:]]
+    try:
+        for name in groups[0]:
+            _compile(numba, kernels[name], SIGNATURES[name])
+    except BaseException:  # interrupted: the helpers' work is no longer wanted
+        for helper in helpers:
+            helper.kill()
+            helper.communicate()
+        raise
+    for helper in helpers:
+        _wait(helper)
+    log.debug(
+        "compiled %d kernels in %d processes in %.1f s",
+        len(cold),
+        workers,
+        time.perf_counter() - start,
+    )
+
+
+def share_out(names: list[str], groups: int, seconds: dict[str, float]) -> list[list[str]]:
+    """``names`` in ``groups`` lists of about equal total ``seconds`` (the longest first,
+    each into the lightest list so far; 1 s for a name without a time). Every list is
+    non-empty when there are at least ``groups`` names."""
+    shares: list[list[str]] = [[] for _ in range(groups)]
+    totals = [0.0] * groups
+    for name in sorted(names, key=lambda n: -seconds.get(n, 1.0)):
+        lightest = totals.index(min(totals))
+        shares[lightest].append(name)
+        totals[lightest] += seconds.get(name, 1.0)
+    return shares
+
+
+def signature(numba: Any, arguments: list[str]) -> tuple:
+    """A kernel signature (a tuple of numba types, as ``dispatcher.signatures`` lists them)
+    from its arguments' type ``repr``, e.g. ``["Array(float64, 2, 'C', False,
+    aligned=True)", "float64"]``."""
+    namespace = vars(numba.core.types)
+    # the texts are raytrad's own (_kernel_signatures.py), never user input
+    return tuple(eval(text, {"__builtins__": {}}, namespace) for text in arguments)
+
+
+def _cached(numba: Any, dispatcher: Any, signatures: list[list[str]]) -> bool:
+    """Whether numba's cache holds ``dispatcher`` for every one of ``signatures`` (read
+    from its index as numba reads it before compiling); True where it cannot tell."""
+    try:
+        cache = dispatcher._cache
+        index = cache._cache_file._load_index()
+        codegen = dispatcher.targetctx.codegen()
+        return all(cache._index_key(signature(numba, t), codegen) in index for t in signatures)
+    except Exception as error:  # numba internals moved, no cache: leave it to numba
+        log.debug("cannot read numba's cache for %s: %s", dispatcher, error)
+        return True
+
+
+def _compile(numba: Any, dispatcher: Any, signatures: list[list[str]]) -> None:
+    """Compile ``dispatcher`` for each of ``signatures`` (numba saves it to its cache); a
+    signature numba refuses is left to compile lazily."""
+    for arguments in signatures:
+        try:
+            dispatcher.compile(signature(numba, arguments))
+        except Exception as error:
+            log.debug("compiling %s%s ahead failed: %s", dispatcher, arguments, error)
+
+
+def _spawn(names: list[str]) -> subprocess.Popen:
+    """A helper process compiling the kernels ``names`` into numba's cache."""
+    command = [sys.executable, "-m", "raytrad.core.compiled", *names]
+    return subprocess.Popen(
+        command, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE
+    )
+
+
+def _wait(helper: subprocess.Popen) -> None:
+    """Wait for a helper at most :data:`HELPER_TIMEOUT`; kill it past that (or when this
+    process is interrupted meanwhile) and log why it failed."""
+    try:
+        _, errors = helper.communicate(timeout=HELPER_TIMEOUT)
+    except BaseException:
+        helper.kill()
+        helper.communicate()
+        raise
+    if helper.returncode:
+        log.debug("kernel compiler %s failed: %s", helper.args, errors.decode(errors="replace"))
+
+
+def _compile_named(names: list[str]) -> int:
+    """Entry of a helper process: compile the kernels ``names`` for their signatures in
+    :data:`raytrad.core._kernel_signatures.SIGNATURES` into numba's cache."""
+    import numba
+
+    from raytrad.core._kernel_signatures import SIGNATURES
+
+    kernels = _dispatchers(numba)
+    for name in names:
+        _compile(numba, kernels[name], SIGNATURES[name])
+    return 0
 
 
 def _jit(numba: Any, function: Any) -> Any:
@@ -93,3 +251,7 @@ def _jit(numba: Any, function: Any) -> Any:
     except RuntimeError as error:  # numba: "cannot cache function ...: no locator"
         log.debug("numba cannot cache %s (%s): compiling without a cache", function, error)
         return numba.njit(nogil=True)(function)
+
+
+if __name__ == "__main__":  # a helper of _compile_ahead
+    sys.exit(_compile_named(sys.argv[1:]))

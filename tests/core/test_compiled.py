@@ -141,3 +141,93 @@ def test_the_gather_sort_agrees_with_numpy(n):
     compiled.get()._sort_ascending(got, n)
     np.testing.assert_array_equal(got[:n], np.sort(values[:n]))
     np.testing.assert_array_equal(got[n:], values[n:])
+
+
+# -- compiling ahead, on every core, the first time ------------------------------------
+
+
+#: A render recording the signatures of every kernel call from Python (the path of a call
+#: from Python, whether numba then compiles or loads): tools/kernel_signatures.py's.
+def _recorded_calls(tmp_path) -> dict[str, list[list[str]]]:
+    import json
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[2]
+    sys.path.insert(0, str(root / "tools"))
+    try:
+        from kernel_signatures import RECORD
+    finally:
+        sys.path.remove(str(root / "tools"))
+    scene = str(root / "scenes" / "cornell-box.obj")
+    command = [sys.executable, "-c", RECORD, "render", scene, "--receivers", "500", "-q"]
+    done = subprocess.run(command, capture_output=True, text=True, cwd=tmp_path, check=True)
+    return json.loads(done.stdout.strip().splitlines()[-1])
+
+
+def test_a_render_calls_only_listed_signatures(tmp_path) -> None:
+    from raytrad.core._kernel_signatures import SIGNATURES
+
+    called = _recorded_calls(tmp_path)
+    assert "near_triangles" in called and "shoot" in called  # the pass and the solve ran
+    for name, signatures in called.items():
+        listed = {tuple(arguments) for arguments in SIGNATURES.get(name, [])}
+        missing = {tuple(arguments) for arguments in signatures} - listed
+        assert not missing, f"{name} {missing}: rerun python tools/kernel_signatures.py"
+
+
+def test_listed_signatures_are_numba_signatures() -> None:
+    import numba
+
+    from raytrad.core._kernel_signatures import SECONDS, SIGNATURES
+
+    kernels = compiled._dispatchers(numba)
+    assert set(SECONDS) == set(SIGNATURES) and set(SIGNATURES) <= set(kernels)
+    for signatures in SIGNATURES.values():
+        for arguments in signatures:
+            parsed = compiled.signature(numba, arguments)
+            assert all(isinstance(t, numba.core.types.Type) for t in parsed)
+            assert [repr(t) for t in parsed] == arguments
+
+
+def test_share_out_balances_and_keeps_every_name() -> None:
+    seconds = {"a": 5.0, "b": 3.0, "c": 2.0, "d": 1.0, "e": 1.0}
+    groups = compiled.share_out(list(seconds), 2, seconds)
+    assert sorted(n for g in groups for n in g) == sorted(seconds)
+    totals = sorted(sum(seconds[n] for n in g) for g in groups)
+    assert totals == [6.0, 6.0]
+    assert all(compiled.share_out(["x", "y", "z"], 3, {}))  # each group gets one
+
+
+def test_a_helper_compiles_into_the_cache_and_the_check_sees_it(tmp_path) -> None:
+    import os
+    import subprocess
+    import sys
+
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "cache"), "RAYTRAD_COMPILERS": "1"}
+    helper = [sys.executable, "-m", "raytrad.core.compiled", "column_capture", "column_final"]
+    subprocess.run(helper, env=env, check=True, capture_output=True)
+    check = (
+        "import numba\n"
+        "from raytrad.core import compiled\n"
+        "from raytrad.core._kernel_signatures import SIGNATURES as S\n"
+        "k = compiled._dispatchers(numba)\n"
+        "print([compiled._cached(numba, k[n], S[n]) for n in "
+        "('column_capture', 'column_final', 'column_accumulate')])\n"
+    )
+    done = subprocess.run(
+        [sys.executable, "-c", check], env=env, check=True, capture_output=True, text=True
+    )
+    assert done.stdout.strip() == "[True, True, False]"
+
+
+def test_compilers_reads_the_environment(monkeypatch) -> None:
+    monkeypatch.setenv("RAYTRAD_COMPILERS", "3")
+    assert compiled.compilers() == 3
+    monkeypatch.setenv("RAYTRAD_COMPILERS", "0")
+    assert compiled.compilers() == 1
+    monkeypatch.setenv("RAYTRAD_COMPILERS", "many")
+    assert compiled.compilers() == 1
+    monkeypatch.delenv("RAYTRAD_COMPILERS")
+    assert 1 <= compiled.compilers() <= compiled.MAX_COMPILERS
