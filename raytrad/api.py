@@ -23,15 +23,12 @@ from raytrad.core.adaptive import Refinement
 from raytrad.core.compare import compare_methods
 from raytrad.core.convergence import ConvergenceMonitor, ErrorLog, Reference
 from raytrad.core.pipeline import Prepared, RunBudget, timed
-from raytrad.core.reference import (
-    automatic_reference,
-    named_reference,
-    reference_at_receivers,
-)
+from raytrad.core.reference import automatic_reference, named_reference, reference_at_receivers
 from raytrad.core.solver import SHOOTING_METHODS, SolveResult, SolverState
 from raytrad.core.solver import solve as solve_system
 from raytrad.errors import RaytradError, SettingsError
 from raytrad.formats.ply import read_radiosity_ply
+from raytrad.outputs import resume as resuming
 from raytrad.outputs.comparison import markdown_table, write_comparison
 from raytrad.outputs.plot import plot_convergence
 from raytrad.outputs.progress import RenderProgress, pass_hook, shot_hook
@@ -221,7 +218,8 @@ def render(
     resume : bool or "auto"
         Continue from ``<output_dir>/<stem>.checkpoint.npz`` if it exists (refused, naming
         what changed, when it was made for another scene or other mesh settings; with
-        ``"auto"``, as batch jobs do, such a checkpoint is passed over with a warning).
+        ``"auto"``, as batch jobs do, such a checkpoint is passed over with a warning);
+        ``report.json``'s ``"resumed"`` says what was taken from it.
     progress : callable or None
         ``progress(RenderProgress)`` after each shot.
     stop : callable or None
@@ -252,6 +250,7 @@ def render(
         checkpoint = checkpoint_path(output_dir, scene_path.stem)
         strict = resume is True
         state, columns = resume_point(checkpoint, key, strict) if resume else (None, None)
+        taken = resuming.resume_facts(state, columns)  # before the solve moves ``state`` on
 
         def save(state: SolverState, engine: Any = None) -> None:  # with a pass's columns
             save_state(checkpoint, state, key, (engine or prepared.engine).pass_column_parts())
@@ -294,7 +293,7 @@ def render(
             elif checkpoint.exists():
                 checkpoint.unlink()
             report = build_report(scene_path, baked, result, settings, timings, outputs)
-            report["outputs_detail"] = facts
+            report |= {"outputs_detail": facts, "resumed": taken}
             add_error_log(report, error_log, ref)
             add_total_error(report, error_log, error, refinement, solved.mesh.receiver_count)
             outputs["report"] = output_dir / "report.json"

@@ -265,9 +265,13 @@ def test_interrupted_render_resumes_to_the_same_answer(tmp_path: Path) -> None:
     assert checkpoint.is_file() and first.outputs["checkpoint"] == checkpoint
     assert json.loads((out / "report.json").read_text())["solve"]["stop_reason"] == "interrupted"
 
+    assert straight.report["resumed"] is None and first.report["resumed"] is None
     second = api.render(scene, out, settings, resume=True)
     assert second.result.stop_reason == "converged"
     assert second.result.state.shots == straight.result.state.shots
+    resumed = second.report["resumed"]
+    assert resumed["shots"] == 20 and resumed["form_factor_columns"] == 0  # the pass was done
+    assert 0 < resumed["solve_seconds"] <= first.result.state.seconds
     np.testing.assert_allclose(second.result.radiosity, straight.result.radiosity, rtol=1e-9)
     assert not checkpoint.exists()
     _, _, written = read_radiosity_ply(out / "cornell.ply")
@@ -289,6 +293,10 @@ def test_a_stop_in_the_form_factor_pass_saves_and_resumes(tmp_path: Path) -> Non
     assert (out / "cornell-box.checkpoint.npz").is_file() and (out / "cornell-box.ply").is_file()
     second = api.render(scene, out, settings, resume=True)
     assert second.result.stop_reason == "converged"
+    resumed = json.loads((out / "report.json").read_text())["resumed"]
+    columns = report["solve"]["form_factor_columns"]  # those the cut pass finished
+    assert resumed == {"shots": 0, "solve_seconds": 0.0, "form_factor_columns": columns}
+    assert columns >= 1
     # the columns of the cut pass came from the checkpoint: fewer rays, the same answer
     assert second.result.state.rays < straight.result.state.rays
     assert second.result.state.shots == straight.result.state.shots

@@ -5,7 +5,8 @@ RMS; and check the race's reference against Mitsuba's path tracer.
 The renderers are measured in one run, at the same probe points and against the same
 cached path-traced reference as ``tools/bench_accuracy.py`` (its area and contact probes,
 ``--per-quad``/``--along``/``--paths``/``--cache`` with the same defaults, so the two tools
-share one cache), with its error definitions (:func:`bench_accuracy.report`):
+share one cache; on a fresh checkout the first run path-traces it, about 4 minutes), with
+its error definitions (:func:`bench_accuracy.report`):
 
 - worst-surface mean error: the largest, over surfaces other than the light and over RGB
   channels, of ``|mean(got) / mean(reference) - 1|`` at the surface's area probes;

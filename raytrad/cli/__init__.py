@@ -180,6 +180,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     level = logging.DEBUG if args.verbose else logging.WARNING if args.quiet else logging.INFO
     logging.basicConfig(level=level, format="raytrad: %(levelname)s: %(message)s")
     logging.getLogger("trimesh").setLevel(logging.ERROR)
+    logging.getLogger("numba").setLevel(logging.WARNING)  # its compiler's debug: 10^5 lines
     try:
         if args.command == "render":
             return _render(args)

@@ -27,6 +27,7 @@ import subprocess
 import sys
 import threading
 import time
+from pathlib import Path
 from types import SimpleNamespace
 from typing import Any
 
@@ -127,7 +128,7 @@ def _compile_ahead(numba: Any, kernels: dict[str, Any]) -> None:
     cache lacks some of the kernels and signatures a render calls
     (:data:`raytrad.core._kernel_signatures.SIGNATURES`), they are shared out by their
     measured compile times among :func:`compilers` processes: this one compiles its share,
-    the others (``python -m raytrad.core.compiled NAME ...``) theirs into numba's cache,
+    the others (:func:`helper_command`) theirs into numba's cache,
     from which this process then loads them. Anything that goes wrong (no cache, a helper
     that fails or takes over :data:`HELPER_TIMEOUT`) leaves numba compiling lazily, as
     without this.
@@ -208,11 +209,31 @@ def _compile(numba: Any, dispatcher: Any, signatures: list[list[str]]) -> None:
             log.debug("compiling %s%s ahead failed: %s", dispatcher, arguments, error)
 
 
+#: A helper's program: its first argument is where this process imported raytrad from.
+HELPER = (
+    "import sys; sys.path.insert(0, sys.argv[1]); "
+    "from raytrad.core.compiled import _compile_named; sys.exit(_compile_named(sys.argv[2:]))"
+)
+
+
+def helper_command(names: list[str]) -> list[str]:
+    """The command of a helper process compiling the kernels ``names`` into numba's cache.
+
+    It imports raytrad from where this process did, whatever its working directory
+    holds: ``python -m raytrad...`` run from a source checkout beside an installed copy
+    imported the checkout's, compiled into the checkout's cache (another key), and the
+    render compiled everything again."""
+    root = str(Path(__file__).resolve().parents[2])
+    return [sys.executable, "-c", HELPER, root, *names]
+
+
 def _spawn(names: list[str]) -> subprocess.Popen:
-    """A helper process compiling the kernels ``names`` into numba's cache."""
-    command = [sys.executable, "-m", "raytrad.core.compiled", *names]
+    """A helper process compiling the kernels ``names`` (:func:`helper_command`)."""
     return subprocess.Popen(
-        command, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE
+        helper_command(names),
+        stdin=subprocess.DEVNULL,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
     )
 
 
@@ -251,7 +272,3 @@ def _jit(numba: Any, function: Any) -> Any:
     except RuntimeError as error:  # numba: "cannot cache function ...: no locator"
         log.debug("numba cannot cache %s (%s): compiling without a cache", function, error)
         return numba.njit(nogil=True)(function)
-
-
-if __name__ == "__main__":  # a helper of _compile_ahead
-    sys.exit(_compile_named(sys.argv[1:]))

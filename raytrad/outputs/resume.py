@@ -197,3 +197,19 @@ def _flat(settings: dict[str, Any], prefix: str = "") -> dict[str, Any]:
 def checkpoint_path(output_dir: Path, stem: str) -> Path:
     """Where a run's checkpoint lives: ``<output_dir>/<stem>.checkpoint.npz``."""
     return output_dir / f"{stem}.checkpoint.npz"
+
+
+def resume_facts(
+    state: SolverState | None, columns: dict[str, np.ndarray] | None
+) -> dict[str, Any] | None:
+    """What a run took from its checkpoint, for ``report.json``'s ``"resumed"``: the
+    solve's shots and seconds (0 where the pass was cut short: the solve then starts
+    afresh) and the form-factor columns it did not compute again; None for a run that
+    did not resume."""
+    if state is None and not columns:
+        return None
+    return {
+        "shots": state.shots if state is not None else 0,
+        "solve_seconds": float(state.seconds) if state is not None else 0.0,
+        "form_factor_columns": len(columns["patch"]) if columns else 0,
+    }

@@ -206,8 +206,13 @@ def test_a_helper_compiles_into_the_cache_and_the_check_sees_it(tmp_path) -> Non
     import sys
 
     env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "cache"), "RAYTRAD_COMPILERS": "1"}
-    helper = [sys.executable, "-m", "raytrad.core.compiled", "column_capture", "column_final"]
-    subprocess.run(helper, env=env, check=True, capture_output=True)
+    # run where another raytrad lies (a source checkout beside an installed copy): the
+    # helper must still import this process's raytrad, or it fills another cache
+    decoy = tmp_path / "decoy"
+    (decoy / "raytrad").mkdir(parents=True)
+    (decoy / "raytrad" / "__init__.py").write_text("raise ImportError('the decoy')\n")
+    helper = compiled.helper_command(["column_capture", "column_final"])
+    subprocess.run(helper, env=env, check=True, capture_output=True, cwd=decoy)
     check = (
         "import numba\n"
         "from raytrad.core import compiled\n"
