@@ -267,25 +267,35 @@ def foot_probes(
 def shut_in(scene: Scene, probes: Probes, rays: int = 256) -> np.ndarray:
     """(N,) bool: probes most of whose hemisphere is the back of single-sided surfaces (the
     ceiling in the gap behind the lamp). No one sees them; raytrad's error estimate skips
-    them too."""
-    from raytrad.core.pathtrace import cosine_directions
+    them too. :func:`hidden_points` with ``rays`` rays a probe."""
+    return hidden_points(scene, probes.points, probes.normals, rays)
+
+
+def hidden_points(
+    scene: Scene, points: np.ndarray, normals: np.ndarray, rays: int, seed: int = 3
+) -> np.ndarray:
+    """(N,) bool: points (N, 3) facing ``normals`` (N, 3) more than half of whose ``rays``
+    cosine-weighted rays hit the back of a single-sided surface of ``scene``: under or
+    inside geometry, where no one sees the surface. The rays are drawn point after point
+    from ``default_rng(seed)``, all traced in one call."""
+    from raytrad.core.pathtrace import cosine_directions_from
     from raytrad.core.visibility import Occluder
 
-    _, normals = triangle_areas_normals(scene.triangle_vertices())
-    rng = np.random.default_rng(3)
-    out = np.zeros(len(probes.points), dtype=bool)
+    _, facing = triangle_areas_normals(scene.triangle_vertices())
+    uniforms = np.random.default_rng(seed).random((len(points), 2, rays))
+    repeat = np.repeat(np.arange(len(points)), rays)
+    direction = cosine_directions_from(
+        normals[repeat], uniforms[:, 0].ravel(), uniforms[:, 1].ravel()
+    )
     with Occluder(scene.positions, scene.triangles) as occluder:
-        for i, (x, n) in enumerate(zip(probes.points, probes.normals, strict=True)):
-            direction = cosine_directions(np.tile(n, (rays, 1)), rng)
-            origin = np.tile(occluder.to_local(x[None] + 1e-6 * n), (rays, 1))
-            hit, _ = occluder.intersect_local(origin, direction)
-            ok = hit >= 0
-            back = np.zeros(rays, dtype=bool)
-            back[ok] = (np.einsum("ij,ij->i", normals[hit[ok]], direction[ok]) > 0) & (
-                ~scene.double_sided[hit[ok]]
-            )
-            out[i] = back.mean() > 0.5
-    return out
+        origin = occluder.to_local(points + 1e-6 * normals)[repeat]
+        hit, _ = occluder.intersect_local(origin, direction)
+    ok = hit >= 0
+    back = np.zeros(len(hit), dtype=bool)
+    back[ok] = (np.einsum("ij,ij->i", facing[hit[ok]], direction[ok]) > 0) & (
+        ~scene.double_sided[hit[ok]]
+    )
+    return back.reshape(-1, rays).mean(axis=1) > 0.5
 
 
 def reference(

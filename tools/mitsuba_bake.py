@@ -9,12 +9,13 @@ Debian's ``libllvm19`` (``apt install libllvm19``). :func:`import_mitsuba` finds
 unless it is set. LLVM 15 does not do: Dr.Jit 1.5's kernels use an instruction it cannot
 lower (``fmaximum``), and the process aborts.
 
-The scene: one PLY shape per raytrad material (flat face normals), Mitsuba's ``diffuse``
-BSDF of the material's RGB reflectance (one-sided, black behind like raytrad's surfaces),
-an ``area`` emitter of radiance ``M / pi`` on emitting materials (a Lambertian emitter of
-exitance ``M``), no environment. At a point ``x`` with normal ``n``, of reflectance ``rho``
-and emitted exitance ``M``, the radiosity ``B = M + rho E``, and each sample of the
-irradiance ``E`` is two estimates added, as a path tracer does at a diffuse vertex:
+The scene: one PLY shape per raytrad material (written by trimesh; flat face normals),
+Mitsuba's ``diffuse`` BSDF of the material's RGB reflectance (one-sided, black behind like
+raytrad's surfaces), an ``area`` emitter of radiance ``M / pi`` on emitting materials (a
+Lambertian emitter of exitance ``M``), no environment. At a point ``x`` with normal ``n``,
+of reflectance ``rho`` and emitted exitance ``M``, the radiosity ``B = M + rho E``, and
+each sample of the irradiance ``E`` is two estimates added, as a path tracer does at a
+diffuse vertex:
 
 - direct: one emitter sample from ``x`` (``Scene.sample_emitter_direction`` with the
   shadow ray), ``L cos / pdf``;
@@ -40,6 +41,7 @@ from pathlib import Path
 from types import ModuleType
 
 import numpy as np
+import trimesh
 
 from raytrad.scene import Scene
 
@@ -102,22 +104,6 @@ def import_mitsuba(threads: int) -> tuple[ModuleType, ModuleType] | str:
     return mi, dr
 
 
-def _write_ply(path: Path, positions: np.ndarray, faces: np.ndarray) -> None:
-    """A binary little-endian PLY of float32 vertices and int32 triangles."""
-    header = (
-        "ply\nformat binary_little_endian 1.0\n"
-        f"element vertex {len(positions)}\n"
-        "property float x\nproperty float y\nproperty float z\n"
-        f"element face {len(faces)}\nproperty list uchar int vertex_indices\nend_header\n"
-    )
-    records = np.zeros(len(faces), dtype=[("count", "u1"), ("index", "<i4", (3,))])
-    records["count"], records["index"] = 3, faces
-    with open(path, "wb") as stream:
-        stream.write(header.encode("ascii"))
-        stream.write(positions.astype("<f4").tobytes())
-        stream.write(records.tobytes())
-
-
 def mitsuba_scene(mi: ModuleType, scene: Scene) -> object:
     """``scene`` as a Mitsuba scene (see the module docstring), its integrator the ``path``
     integrator."""
@@ -132,7 +118,8 @@ def mitsuba_scene(mi: ModuleType, scene: Scene) -> object:
                 continue
             used, faces = np.unique(triangles, return_inverse=True)
             path = Path(folder) / f"material{m}.ply"
-            _write_ply(path, scene.positions[used], faces.reshape(-1, 3))
+            shape_mesh = trimesh.Trimesh(scene.positions[used], faces.reshape(-1, 3), process=False)
+            path.write_bytes(trimesh.exchange.ply.export_ply(shape_mesh, encoding="binary"))
             shape = {
                 "type": "ply",
                 "filename": str(path),
