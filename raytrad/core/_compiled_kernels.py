@@ -276,15 +276,18 @@ def _visible_centroid(tri, x, n, horizon, out):
         out[d] /= max(count, 1)
 
 
-def sample_weights(points, normals, samples, sample_normals, near_reach, area):
-    """Disk-approximation weights of far sample pairs and the near mask (see
-    :func:`raytrad.core.kernels.numpy_sample_weights`)."""
+def sample_weights(points, normals, sees, samples, sample_normals, near_reach, area):
+    """Disk-approximation weights of far sample pairs and the near mask of the receivers
+    that see the patch (see :func:`raytrad.core.kernels.numpy_sample_weights`)."""
     c_count, s_count = len(points), len(samples)
     weight = np.zeros((c_count, s_count))
     far = np.zeros((c_count, s_count), dtype=np.bool_)
     near = np.zeros((c_count, s_count), dtype=np.bool_)
     for c in range(c_count):
+        if not sees[c]:
+            continue
         x, n = points[c], normals[c]
+        found = False
         for s in range(s_count):
             dx = samples[s, 0] - x[0]
             dy = samples[s, 1] - x[1]
@@ -294,13 +297,18 @@ def sample_weights(points, normals, samples, sample_normals, near_reach, area):
             inv_r = 1.0 / (r if r > 0.0 else 1.0)
             if r < near_reach[s]:
                 near[c, s] = True
+                found = True
                 continue
             cos_r = (dx * n[0] + dy * n[1] + dz * n[2]) * inv_r
             m = sample_normals[s]
             cos_s = -(dx * m[0] + dy * m[1] + dz * m[2]) * inv_r
             if cos_r > 0.0 and cos_s > 0.0:
                 far[c, s] = True
+                found = True
                 weight[c, s] = cos_r * cos_s * area[s] / (math.pi * r2 + area[s])
+        if not found:
+            for s in range(s_count):
+                near[c, s] = True
     return weight, far, near
 
 

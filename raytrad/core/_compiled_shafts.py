@@ -2,7 +2,7 @@
 (imported only there): the shaft test (pairs nothing can block) and the convex-blocker
 test (pairs one occluder hides wholly). Plain Python as written here;
 :func:`raytrad.core.compiled.get` compiles every function in :data:`KERNELS`. Each
-computes what its numpy reference computes (:func:`raytrad.core.kernels.numpy_shaft_clear`,
+computes what its numpy reference computes (:func:`raytrad.core.shafts.numpy_shaft_clear`,
 :func:`raytrad.core.blockers.numpy_blocked`); see there for shapes and units.
 """
 
@@ -15,6 +15,8 @@ import numpy as np
 #: Every function to compile, each after the helpers it calls.
 KERNELS = (
     "_outside_pyramid",
+    "_facet_outside",
+    "_beyond_patch",
     "shaft_clear",
     "_heights",
     "_sheet_hides",
@@ -148,11 +150,17 @@ def shaft_clear(
     band,
     patch_center,
     patch_reach,
+    targets,
+    outline,
+    patch_normal,
+    margins,
 ):
     """Receivers whose shaft to a patch no facet can block (see
-    :func:`raytrad.core.kernels.numpy_shaft_clear`): per receiver, the candidate facets are
-    a few word operations on packed side bits; only those get the capsule and pyramid
-    tests."""
+    :func:`raytrad.core.shafts.numpy_shaft_clear`): per receiver, the candidate facets are
+    a few word operations on packed side bits; only those get the capsule, pyramid and
+    separating-plane tests."""
+    flat = margins[0]
+    limits = np.array([margins[0], margins[1], margins[2], margins[3], band])
     count = len(radii)
     words = sides.shape[1] // 2
     tail = count - 64 * (words - 1)
@@ -201,6 +209,10 @@ def shaft_clear(
                     dy,
                     dz,
                     patch_reach,
+                    targets,
+                    flat + band,
+                ) and not _beyond_patch(
+                    ox, oy, oz, hull, hull_ptr[q], hull_ptr[q + 1], outline, patch_normal, limits
                 ):
                     out[c] = False
                     break
@@ -209,9 +221,11 @@ def shaft_clear(
     return out
 
 
-def _outside_pyramid(ox, oy, oz, height, band, hull, a, b, dx, dy, dz, reach):
-    """Whether the ball (o + d, reach) lies wholly outside one side plane of the pyramid
-    from ``o`` through the hull ``hull[a:b]`` (counter-clockwise about the facet normal)."""
+def _outside_pyramid(ox, oy, oz, height, band, hull, a, b, dx, dy, dz, reach, targets, margin):
+    """Whether the ball (o + d, reach), or every one of ``targets`` by more than
+    ``margin``, lies wholly outside one side plane of the pyramid from ``o`` through the
+    hull ``hull[a:b]`` (counter-clockwise about the facet normal; ``height`` is o's above
+    the facet's plane)."""
     if abs(height) <= band or b - a < 3:
         return False
     sign = -1.0 if height > 0.0 else 1.0
@@ -228,5 +242,77 @@ def _outside_pyramid(ox, oy, oz, height, band, hull, a, b, dx, dy, dz, reach):
         nz = sign * (ax * by - ay * bx)
         norm = math.sqrt(nx * nx + ny * ny + nz * nz)
         if nx * dx + ny * dy + nz * dz < -reach * norm:
+            return True
+        if len(targets) == 0:
+            continue
+        limit = -margin * norm
+        outside = True
+        for v in range(len(targets)):
+            t = targets[v]
+            if nx * (t[0] - ox) + ny * (t[1] - oy) + nz * (t[2] - oz) >= limit:
+                outside = False
+                break
+        if outside:
+            return True
+    return False
+
+
+def _beyond_patch(ox, oy, oz, hull, a, b, outline, normal, limits):
+    """Whether the patch's plane or a side plane of the shaft from ``o`` through the
+    patch's convex outline separates the facet ``hull[a:b]`` from the shaft (see
+    :func:`raytrad.core.shafts.numpy_shaft_clear`; ``limits`` the facets' flatness, the
+    targets' lift, the patch's lowest height and height range, and the plane band)."""
+    if len(outline) < 3:
+        return False
+    flat, lift, level, thick, band = limits[0], limits[1], limits[2], limits[3], limits[4]
+    # the patch's plane: every target is about lift above its lowest point, the facet
+    # below half that
+    cut = level + 0.5 * lift
+    if normal[0] * ox + normal[1] * oy + normal[2] * oz > cut + flat + band:
+        below = True
+        for k in range(a, b):
+            h = normal[0] * hull[k, 0] + normal[1] * hull[k, 1] + normal[2] * hull[k, 2]
+            if h >= cut - flat - band:
+                below = False
+                break
+        if below:
+            return True
+    return _facet_outside(ox, oy, oz, hull, a, b, outline, 2.0 * lift + flat + band + thick)
+
+
+def _facet_outside(ox, oy, oz, hull, a, b, outline, margin):
+    """Whether the facet ``hull[a:b]`` lies more than ``margin`` outside one side plane of
+    the shaft from ``o`` through the patch's convex outline (targets within ``margin`` /
+    2 of the outline's plane)."""
+    count = len(outline)
+    mx, my, mz = 0.0, 0.0, 0.0
+    for v in range(count):
+        mx += outline[v, 0] / count
+        my += outline[v, 1] / count
+        mz += outline[v, 2] / count
+    for k in range(count):
+        j = k + 1 if k + 1 < count else 0
+        ax = outline[k, 0] - ox
+        ay = outline[k, 1] - oy
+        az = outline[k, 2] - oz
+        bx = outline[j, 0] - ox
+        by = outline[j, 1] - oy
+        bz = outline[j, 2] - oz
+        nx = ay * bz - az * by
+        ny = az * bx - ax * bz
+        nz = ax * by - ay * bx
+        norm = math.sqrt(nx * nx + ny * ny + nz * nz)
+        inner = nx * (mx - ox) + ny * (my - oy) + nz * (mz - oz)
+        if norm == 0.0 or abs(inner) <= 1e-9 * norm * (abs(mx - ox) + abs(my - oy) + abs(mz - oz)):
+            continue
+        if inner < 0.0:
+            nx, ny, nz = -nx, -ny, -nz
+        limit = -margin * norm
+        outside = True
+        for v in range(a, b):
+            if nx * (hull[v, 0] - ox) + ny * (hull[v, 1] - oy) + nz * (hull[v, 2] - oz) >= limit:
+                outside = False
+                break
+        if outside:
             return True
     return False

@@ -147,10 +147,10 @@ def gathered_irradiance(
     irradiance = np.zeros((rows.count, 3))
     if rows.means is not None:  # only the means the rows read (a few new points' worth)
         base = rows.means.base
-        read = [g.sources[g.sources >= base] for _, _, _, g in rows.patches]
-        radiosity = rows.means.extend(
-            radiosity, np.unique(np.concatenate([*read, EMPTY.sources])) - base
-        )
+        read = np.zeros(len(rows.means.pointer) - 1, dtype=bool)
+        for _, _, _, g in rows.patches:
+            read[g.sources[g.sources >= base] - base] = True
+        radiosity = rows.means.extend(radiosity, np.flatnonzero(read))
     for patch, near, factors, gather in rows.patches:
         irradiance[near] += factors[:, None] * patch_radiosity[patch]
         if len(gather.receivers):
@@ -288,7 +288,7 @@ def cluster_means(mesh: RadiosityMesh, corner_share: np.ndarray, tree: Clusters)
         area = visible_area[tri]
         total = np.bincount(owner, weights=area, minlength=last - first)[owner]
         share = np.divide(area, total, out=np.zeros_like(area), where=total > 0)
-        pointer, part_receivers, part_shares = numpy_sum_shares(
+        pointer, part_receivers, part_shares = sum_shares(
             np.repeat(owner, 3),
             mesh.triangle_receivers[tri].reshape(-1),
             (share[:, None] * corner_share[tri]).reshape(-1),

@@ -44,8 +44,9 @@ def fill_hidden(mesh: RadiosityMesh, radiosity: np.ndarray, rings: int = 64) -> 
     tri = mesh.triangle_receivers
     a = np.concatenate([tri[:, 0], tri[:, 1], tri[:, 2], tri[:, 1], tri[:, 2], tri[:, 0]])
     b = np.concatenate([tri[:, 1], tri[:, 2], tri[:, 0], tri[:, 0], tri[:, 1], tri[:, 2]])
-    a, b = np.unique(np.column_stack([a, b]), axis=0).T  # each neighbour once
     count = len(out)
+    key = np.unique(a.astype(np.int64) * count + b)  # each neighbour once, sorted by a, b
+    a, b = key // count, key % count
     for _ in range(rings):
         todo = ~known
         if not todo.any():

@@ -344,6 +344,7 @@ def numpy_facing_triangle_sums(
 def sample_weights(
     points: np.ndarray,
     normals: np.ndarray,
+    sees: np.ndarray,
     samples: np.ndarray,
     sample_normals: np.ndarray,
     near_reach: np.ndarray,
@@ -351,12 +352,14 @@ def sample_weights(
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Disk weights of far sample pairs and the near mask, compiled when available (see
     :func:`numpy_sample_weights`, the reference)."""
+    args = (points, normals, sees, samples, sample_normals, near_reach, area)
     fast = compiled.get()
     if fast is None:
-        return numpy_sample_weights(points, normals, samples, sample_normals, near_reach, area)
+        return numpy_sample_weights(*args)
     return fast.sample_weights(
         _f64(points),
         _f64(normals),
+        np.ascontiguousarray(sees, dtype=np.bool_),
         _f64(samples),
         _f64(sample_normals),
         _f64(near_reach),
@@ -367,17 +370,22 @@ def sample_weights(
 def numpy_sample_weights(
     points: np.ndarray,
     normals: np.ndarray,
+    sees: np.ndarray,
     samples: np.ndarray,
     sample_normals: np.ndarray,
     near_reach: np.ndarray,
     area: np.ndarray,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Every (receiver, sub-area sample) pair: far and facing, or near.
+    """Every (receiver, sub-area sample) pair of the receivers that see the patch: far
+    and facing, or near. A receiver that sees the patch but is neither near nor facing
+    any of its samples is near all of them (it is then handled triangle by triangle).
 
     Parameters
     ----------
     points, normals : (C, 3) float64
         Receiver positions [m] and unit normals.
+    sees : (C,) bool
+        The receivers that see part of the patch; the others get no sample.
     samples, sample_normals : (S, 3) float64
         Sub-area sample points [m] and unit normals.
     near_reach : (S,) float64
@@ -399,6 +407,10 @@ def numpy_sample_weights(
     cos_s = -np.einsum("csj,sj->cs", d, sample_normals) * inv_r
     near = r < near_reach[None, :]
     far = ~near & (cos_r > 0) & (cos_s > 0)
+    near |= (~far.any(axis=1) & ~near.any(axis=1))[:, None]
+    sees = np.asarray(sees, dtype=bool)[:, None]
+    far &= sees
+    near &= sees
     weight = np.where(far, disk_form_factor(cos_r, cos_s, r2, area[None, :]), 0.0)
     return weight, far, near
 
@@ -481,131 +493,3 @@ def numpy_visibility_rays(
         far_c,
         far_s,
     )
-
-
-def shaft_clear(
-    origins: np.ndarray,
-    sides: np.ndarray,
-    patch_sides: np.ndarray,
-    normals: np.ndarray,
-    offsets: np.ndarray,
-    centers: np.ndarray,
-    radii: np.ndarray,
-    hull: np.ndarray,
-    hull_ptr: np.ndarray,
-    band: float,
-    patch_center: np.ndarray,
-    patch_reach: float,
-) -> np.ndarray:
-    """Receivers whose shaft to a patch no facet can block, compiled when available (see
-    :func:`numpy_shaft_clear`, the reference)."""
-    args = (origins, sides, patch_sides, normals, offsets, centers, radii, hull, hull_ptr)
-    fast = compiled.get()
-    if fast is None:
-        return numpy_shaft_clear(*args, band, patch_center, patch_reach)
-    return fast.shaft_clear(
-        _f64(origins),
-        np.ascontiguousarray(sides, dtype=np.uint64),
-        np.ascontiguousarray(patch_sides, dtype=np.uint64),
-        _f64(normals),
-        _f64(offsets),
-        _f64(centers),
-        _f64(radii),
-        _f64(hull),
-        np.ascontiguousarray(hull_ptr, dtype=np.int64),
-        float(band),
-        _f64(patch_center),
-        float(patch_reach),
-    )
-
-
-def numpy_shaft_clear(
-    origins: np.ndarray,
-    sides: np.ndarray,
-    patch_sides: np.ndarray,
-    normals: np.ndarray,
-    offsets: np.ndarray,
-    centers: np.ndarray,
-    radii: np.ndarray,
-    hull: np.ndarray,
-    hull_ptr: np.ndarray,
-    band: float,
-    patch_center: np.ndarray,
-    patch_reach: float,
-) -> np.ndarray:
-    """Receivers whose shaft to a patch no facet can block (:mod:`raytrad.core.shafts`).
-
-    A facet can block a ray from a receiver to the patch only if all three hold:
-
-    * the receiver is not strictly on one side of the facet's plane with every target on
-      the patch on or beyond that same side (the packed side bits);
-    * its bounding sphere meets the capsule of radius ``patch_reach`` around the segment
-      from the receiver to the patch's centre;
-    * the patch's bounding ball is not wholly outside one side plane of the pyramid from the
-      receiver through the facet's convex hull (a receiver within ``band`` of the facet's
-      plane has no such pyramid).
-
-    Parameters
-    ----------
-    origins : (N, 3) float64
-        Ray origins [m].
-    sides : (N, 2 W) uint64
-        Their packed front and behind bits (:meth:`~raytrad.core.shafts.Facets.sides`).
-    patch_sides : (2 W,) uint64
-        The patch's packed on-or-in-front and on-or-behind bits
-        (:meth:`~raytrad.core.shafts.Facets.patch_sides`).
-    normals, offsets : (Q, 3), (Q,) float64
-        Facet planes: ``normal . p = offset`` [1], [m].
-    centers, radii : (Q, 3), (Q,) float64
-        Facet bounding spheres [m].
-    hull, hull_ptr : (K, 3) float64, (Q + 1,) int64
-        Facet convex hulls, counter-clockwise about their normals (CSR) [m].
-    band : float
-        Plane band of the pyramid test [m].
-    patch_center : (3,) float64
-        The patch's bounding-sphere centre [m].
-    patch_reach : float
-        Its radius, ray targets' lift included [m].
-
-    Returns
-    -------
-    (N,) bool, True where no ray is needed: the visible fraction is 1.
-
-    References
-    ----------
-    Haines and Wallace (1994), see :mod:`raytrad.core.shafts`.
-    """
-    count = len(radii)
-    words = sides.shape[1] // 2
-
-    def unpack(packed: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        bits = np.unpackbits(
-            np.ascontiguousarray(packed, dtype="<u8").view(np.uint8), axis=-1, bitorder="little"
-        ).astype(bool)
-        return bits[..., :count], bits[..., 64 * words : 64 * words + count]
-
-    front, back = unpack(sides)
-    patch_front, patch_back = unpack(patch_sides[None, :])
-    blocks = ~((front & patch_front) | (back & patch_back))  # (N, Q)
-    delta = np.asarray(patch_center)[None, :] - origins  # (N, 3)
-    length2 = np.einsum("nj,nj->n", delta, delta)
-    safe = np.where(length2 > 0, length2, 1.0)
-    for q in range(count):
-        rel = centers[q][None, :] - origins
-        t = np.where(length2 > 0, np.clip(np.einsum("nj,nj->n", rel, delta) / safe, 0, 1), 0.0)
-        gap = rel - t[:, None] * delta
-        blocks[:, q] &= np.einsum("nj,nj->n", gap, gap) <= (radii[q] + patch_reach) ** 2
-        height = origins @ normals[q] - offsets[q]
-        ring = hull[hull_ptr[q] : hull_ptr[q + 1]]
-        if len(ring) < 3:
-            continue
-        sign = np.where(height > 0, -1.0, 1.0)
-        outside = np.zeros(len(origins), dtype=bool)
-        for k in range(len(ring)):
-            a = ring[k][None, :] - origins
-            b = ring[(k + 1) % len(ring)][None, :] - origins
-            n = sign[:, None] * np.cross(a, b)
-            norm = np.sqrt(np.einsum("nj,nj->n", n, n))
-            outside |= np.einsum("nj,nj->n", n, delta) < -patch_reach * norm
-        blocks[:, q] &= ~(outside & (np.abs(height) > band))
-    return ~blocks.any(axis=1)

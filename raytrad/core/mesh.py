@@ -412,10 +412,11 @@ def surface_receivers(
     """One receiver per (vertex, surface) pair, with its normal, area and inward point."""
     corner_vertex = triangles.reshape(-1)
     corner_surface = np.repeat(surface, 3)
-    keys = np.stack([corner_vertex, corner_surface], axis=1)
-    uniq, inverse = np.unique(keys, axis=0, return_inverse=True)
+    stride = int(corner_surface.max(initial=0)) + 1
+    key = corner_vertex.astype(np.int64) * stride + corner_surface  # sorts as (vertex, surface)
+    unique, inverse = np.unique(key, return_inverse=True)
     inverse = inverse.reshape(-1)
-    count = len(uniq)
+    count = len(unique)
     third = np.repeat(area / 3.0, 3)
     r_area = np.bincount(inverse, weights=third, minlength=count)
     r_normal = np.zeros((count, 3))
@@ -439,7 +440,7 @@ def surface_receivers(
     first = order[np.searchsorted(inverse[order], np.arange(count))]
     r_inward = centroid[first]
     r_normal /= np.linalg.norm(r_normal, axis=1)[:, None]
-    return inverse.reshape(-1, 3), positions[uniq[:, 0]], r_normal, r_area, r_inward
+    return inverse.reshape(-1, 3), positions[unique // stride], r_normal, r_area, r_inward
 
 
 def _subareas(

@@ -43,7 +43,7 @@ from raytrad.core.kernels import (
 )
 from raytrad.core.mesh import RadiosityMesh
 from raytrad.core.outline import boundary_edges, folded_pieces, patch_vertices
-from raytrad.core.shafts import Facets, facets
+from raytrad.core.shafts import Facets, ShaftEnd, facets, shaft_end
 from raytrad.core.spread import RULE_POINTS, RULE_WEIGHTS, GatherShares, corner_form_factors
 from raytrad.core.visibility import Occluder
 
@@ -108,12 +108,11 @@ class PairFactors:
                     for p, (a, b) in enumerate(itertools.pairwise(self._vert_ptr))
                 ]
             )
-            self._patch_reach = mesh.patch_radius + lift + tol.horizon * diagonal
+            self._target_corners()
+            self._ends = [self._shaft_end(p) for p in range(mesh.patch_count)]
         self.blockers: Blockers | None = None
         if self.facets is not None and occluder is not None:  # (so also only compiled)
             self.blockers = blockers(occluder.positions, occluder.triangles, diagonal)
-        if self.blockers is not None:
-            self._target_corners()
         self._triangle_tables()
 
     def _target_corners(self) -> None:
@@ -136,6 +135,20 @@ class PairFactors:
         self._corners = np.concatenate(parts)
         self._corner_reach = np.array(
             [np.linalg.norm(c - m.patch_center[p], axis=1).max() for p, c in enumerate(parts)]
+        )
+
+    def _shaft_end(self, patch: int) -> ShaftEnd:
+        """The patch's end of its shafts (:func:`~raytrad.core.shafts.shaft_end`)."""
+        m, lift = self.mesh, tol.ray_offset * self.diagonal
+        a, b = self._edge_ptr[patch], self._edge_ptr[patch + 1]
+        return shaft_end(
+            m.positions[self._vert_index[self._vert_ptr[patch] : self._vert_ptr[patch + 1]]],
+            self._edge_start[a:b],
+            m.patch_normal[patch] if m.patch_planar[patch] else None,
+            m.patch_center[patch],
+            float(m.patch_radius[patch] + lift + tol.horizon * self.diagonal),
+            self._corners[self._corner_ptr[patch] : self._corner_ptr[patch + 1]],
+            lift,
         )
 
     def _triangle_tables(self) -> None:
@@ -208,11 +221,7 @@ class PairFactors:
         doubt = sees if self.occluder is not None else np.zeros_like(sees)
         if self.facets is not None and sides is not None and doubt.any():
             doubt = doubt & ~self.facets.clear(
-                origins,
-                sides,
-                self._patch_sides[patch],
-                m.patch_center[patch],
-                float(self._patch_reach[patch]),
+                origins, sides, self._patch_sides[patch], self._ends[patch]
             )
         if self.blockers is not None and doubt.any():
             hidden = np.zeros_like(doubt)
@@ -225,7 +234,8 @@ class PairFactors:
             unoccluded = np.where(hidden, 0.0, unoccluded)
             sees &= ~hidden
             doubt &= ~hidden
-        distance = np.linalg.norm(x - m.patch_center[patch], axis=1)
+        offset = x - m.patch_center[patch]
+        distance = np.sqrt(np.einsum("cj,cj->c", offset, offset))
         close = sees & (distance < GATHER_RADII * m.patch_radius[patch])
         sampled = doubt | close
         if not sampled.any():
@@ -246,7 +256,9 @@ class PairFactors:
         )
         near_hidden, node_hidden = hidden[: len(near_c)], hidden[len(near_c) :]
         pair = np.cumsum(close) - 1
-        far_c, far_s = np.nonzero(far & close[:, None] & ~far_hidden)
+        rows = np.flatnonzero(close)
+        far_c, far_s = np.nonzero(far[rows] & ~far_hidden[rows])
+        far_c = rows[far_c]
         n = close[near_c] & ~near_hidden
         h = close[node_c] & ~node_hidden
         pointer, sources, shares = self._shares.spread(
@@ -322,20 +334,17 @@ class PairFactors:
         clusters : near sub-areas' clusters taken whole (:meth:`_near_field`)
         """
         m = self.mesh
+        # a receiver that sees part of the patch but none of its sample points is handled
+        # triangle by triangle
         weight, far, near = sample_weights(
             x,
             nx,
+            sees,
             m.subarea_point[sub],
             m.subarea_normal[sub],
             NEAR_FACTOR * m.subarea_size[sub],
             m.subarea_area[sub],
         )
-        # a receiver that sees part of the patch but none of its sample points is handled
-        # triangle by triangle
-        near |= (sees & ~far.any(axis=1) & ~near.any(axis=1))[:, None]
-        near &= sees[:, None]
-        far &= sees[:, None]
-        weight[~sees] = 0.0
         items = self._near_field(x, nx, near, sub)
         return weight, far, items[:5], items[5:]
 

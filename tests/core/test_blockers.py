@@ -18,45 +18,18 @@ from raytrad.core.mesh import MeshSettings
 from raytrad.core.visibility import Occluder
 from raytrad.scene.builtin import shadow_scene
 
-from .test_shafts import furniture_room
-
-DIAGONAL = 10.0
-LIFT = tol.ray_offset * DIAGONAL
-
-
-def quad_triangles(quad: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    return np.asarray(quad, dtype=float), np.array([[0, 1, 2], [0, 2, 3]])
-
-
-def box(
-    center: np.ndarray, half: np.ndarray, angle: float = 0.0, bottom: bool = True
-) -> tuple[np.ndarray, np.ndarray]:
-    """A box turned ``angle`` about y: its 8 corners and 12 (10 without the bottom)
-    triangles, wound outward."""
-    signs = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)], float)
-    c, s = np.cos(angle), np.sin(angle)
-    turn = np.array([[c, 0, s], [0, 1, 0], [-s, 0, c]])
-    points = center + (signs * half) @ turn.T
-    faces = [
-        [0, 1, 3, 2],  # x-
-        [4, 6, 7, 5],  # x+
-        [2, 3, 7, 6],  # y+
-        [0, 2, 6, 4],  # z-
-        [1, 5, 7, 3],  # z+
-    ]
-    if bottom:
-        faces.append([0, 4, 5, 1])  # y-
-    triangles = [[f[0], f[1], f[2]] for f in faces] + [[f[0], f[2], f[3]] for f in faces]
-    return points, np.array(triangles)
-
-
-def join(*parts: tuple[np.ndarray, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
-    points, triangles, base = [], [], 0
-    for p, t in parts:
-        points.append(p)
-        triangles.append(t + base)
-        base += len(p)
-    return np.concatenate(points), np.concatenate(triangles)
+from .occluders import (
+    CASES,
+    DIAGONAL,
+    LIFT,
+    PATCH,
+    box,
+    furniture_room,
+    join,
+    quad_targets,
+    quad_triangles,
+    trace,
+)
 
 
 def test_closed_and_open_boxes_are_solids() -> None:
@@ -98,27 +71,6 @@ def test_non_convex_components_block_nothing() -> None:
     assert square is not None and sorted(square.kind.tolist()) == [bl.SHEET] + [bl.EDGE] * 4
 
 
-def trace(occluder: Occluder, origin: np.ndarray, targets: np.ndarray) -> np.ndarray:
-    """Embree on the segments from ``origin`` to ``targets``, as the pass traces them."""
-    d = targets - origin
-    length = np.linalg.norm(d, axis=1)
-    return occluder.occluded_local(
-        np.repeat((origin - occluder.origin)[None, :], len(d), axis=0),
-        d / length[:, None],
-        length - 0.5 * LIFT,
-    )
-
-
-def quad_targets(quad: np.ndarray, count: int, rng: np.random.Generator) -> np.ndarray:
-    """Random points of a planar quad, lifted ``LIFT`` along its normal (as ray targets)."""
-    normal = np.cross(quad[1] - quad[0], quad[3] - quad[0])
-    normal /= np.linalg.norm(normal)
-    u, v = rng.random((2, count, 1))
-    edge = quad[0] + u * (quad[1] - quad[0])
-    far = quad[3] + u * (quad[2] - quad[3])
-    return edge + v * (far - edge) + LIFT * normal
-
-
 def classify(
     found: bl.Blockers, origins: np.ndarray, quad: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -131,48 +83,6 @@ def classify(
         found.blocked(origins, corners, center, reach),
         bl.numpy_blocked(origins, corners, center, reach, found),
     )
-
-
-#: The constructed cases: an occluder, a patch behind it (a quad), receivers' ray origins
-#: on a line, and whether some but not all of them must be blocked (True), none while
-#: every one sees part of the patch (False), or none (None).
-PATCH = np.array([[-1, 0, 4], [1, 0, 4], [1, 2, 4], [-1, 2, 4.0]])
-PLATE = np.array([[-1, 0, 4], [-1, 2, 4], [1, 2, 4], [1, 0, 4.0]])  # facing -z
-SWEEP = np.column_stack([np.linspace(-4, 4, 161), np.full(161, 1.0), np.zeros(161)])
-CASES = {
-    # a box between, receivers sliding sideways: some peek past its edge
-    "peeking past an edge": (
-        box(np.array([0, 1, 2.0]), np.array([1.2, 1.4, 0.3])),
-        PLATE,
-        SWEEP,
-        True,
-    ),
-    # a thin occluder (a sheet) between parallel plates, larger than the plate's shadow
-    # only in the middle
-    "thin sheet between plates": (
-        quad_triangles(
-            np.array([[-0.8, -0.2, 2], [0.8, -0.2, 2], [0.8, 2.2, 2], [-0.8, 2.2, 2.0]])
-        ),
-        PLATE,
-        SWEEP * [0.5, 1, 1],
-        True,
-    ),
-    # a sheet whose edge lies on the shaft's side: the segments to the patch's edge
-    # graze it (Embree may call them either way), so the pair is not blocked
-    "touching the shaft's boundary": (
-        quad_triangles(np.array([[-2, -2, 2], [0.25, -2, 2], [0.25, 4, 2], [-2, 4, 2.0]])),
-        np.array([[-0.5, 0, 4], [-0.5, 2, 4], [0.5, 2, 4], [0.5, 0, 4.0]]),
-        np.array([[0.0, 1.0, 0.0]]),
-        None,
-    ),
-    # a small box wholly inside the shaft: rays pass round it
-    "inside the shaft": (
-        box(np.array([0, 1, 2.0]), np.array([0.2, 0.2, 0.2])),
-        PLATE,
-        SWEEP,
-        False,
-    ),
-}
 
 
 @pytest.mark.parametrize("case", list(CASES))

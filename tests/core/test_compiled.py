@@ -96,12 +96,17 @@ def test_sample_weights_agree_with_numpy():
     ny = _unit(rng.normal(size=(50, 3)))
     reach = rng.uniform(0.0, 0.8, 50)
     area = rng.uniform(1e-4, 0.1, 50)
-    got = kernels.sample_weights(x, n, y, ny, reach, area)
-    want = kernels.numpy_sample_weights(x, n, y, ny, reach, area)
+    x[10], n[10] = [100.0, 0.0, 0.0], [1.0, 0.0, 0.0]  # faces away from every sample
+    sees = rng.random(300) < 0.7
+    sees[10] = True
+    got = kernels.sample_weights(x, n, sees, y, ny, reach, area)
+    want = kernels.numpy_sample_weights(x, n, sees, y, ny, reach, area)
     np.testing.assert_allclose(got[0], want[0], rtol=0, atol=AGREE)
     np.testing.assert_array_equal(got[1], want[1])
     np.testing.assert_array_equal(got[2], want[2])
     assert got[1].any() and got[2].any()
+    assert got[2][10].all()  # near every sample: handled triangle by triangle
+    assert not (got[1][~sees].any() or got[2][~sees].any() or got[0][~sees].any())
 
 
 def test_visibility_rays_agree_with_numpy():

@@ -14,14 +14,27 @@ from collections.abc import Iterator
 import numpy as np
 import pytest
 
-from raytrad.core import compiled, kernels
+from raytrad.core import compiled, shafts
+from raytrad.core.blockers import target_corners
 from raytrad.core.formfactor import FormFactorEngine
 from raytrad.core.mesh import MeshSettings
 from raytrad.core.pipeline import Prepared, prepare
-from raytrad.core.shafts import MAX_FACETS, facets
-from raytrad.scene import Scene
-from raytrad.scene.builder import quads_scene
+from raytrad.core.shafts import MAX_FACETS, ShaftEnd, facets, shaft_end
+from raytrad.core.visibility import Occluder
 from raytrad.scene.builtin import shadow_scene
+
+from .occluders import (
+    CASES,
+    DIAGONAL,
+    LIFT,
+    PLATE,
+    SWEEP,
+    furniture_room,
+    join,
+    quad_targets,
+    quad_triangles,
+    trace,
+)
 
 CUBE = np.array([[x, y, z] for x in (0.0, 1.0) for y in (0.0, 1.0) for z in (0.0, 1.0)])
 # the cube's 6 faces as 12 triangles (corner index = 4x + 2y + z)
@@ -108,6 +121,44 @@ def test_side_bits_are_the_signs_of_the_heights() -> None:
     np.testing.assert_array_equal(back, heights < -found.band)
 
 
+def _quad_end(quad: np.ndarray, lift: float = 1e-5) -> ShaftEnd:
+    """The shaft end of a planar quad patch (targets lifted ``lift`` along its normal)."""
+    normal = np.cross(quad[1] - quad[0], quad[3] - quad[0])
+    normal /= np.linalg.norm(normal)
+    corners = target_corners(quad, normal, lift)
+    center = quad.mean(axis=0)
+    reach = float(np.linalg.norm(corners - center, axis=1).max())
+    return shaft_end(quad, quad, normal, center, reach, corners, lift)
+
+
+def _folded_end(points: np.ndarray, lift: float = 1e-5) -> ShaftEnd:
+    corners = target_corners(points, None, lift)
+    center = points.mean(axis=0)
+    reach = float(np.linalg.norm(corners - center, axis=1).max())
+    return shaft_end(points, points, None, center, reach, corners, lift)
+
+
+def _shaft_args(found, origins: np.ndarray, patch_sides: np.ndarray, end: ShaftEnd) -> tuple:
+    return (
+        origins,
+        found.sides(origins),
+        patch_sides,
+        found.normal,
+        found.offset,
+        found.center,
+        found.radius,
+        found.hull,
+        found.hull_ptr,
+        found.band,
+        end.center,
+        end.reach,
+        end.targets,
+        end.outline,
+        end.normal,
+        np.array([found.flat, end.lift, end.level, end.thick]),
+    )
+
+
 @pytest.mark.skipif(compiled.get() is None, reason="numba is not installed")
 @pytest.mark.parametrize("count", [5, 64, 150])
 def test_compiled_shaft_test_matches_numpy(count: int) -> None:
@@ -116,89 +167,64 @@ def test_compiled_shaft_test_matches_numpy(count: int) -> None:
     assert found is not None
     origins = rng.uniform(-0.2, 1.2, size=(3000, 3))
     origins[:300] = found.center[rng.integers(0, count, 300)]  # inside facets' spheres
-    sides = found.sides(origins)
+    outcomes = set()
     for trial in range(12):
-        patch = rng.uniform(0.0, 1.0, size=(6, 3))
-        patch_sides = found.patch_sides(patch, None, 1e-5)
-        centre, reach = patch.mean(axis=0), 0.02 * trial
-        args = (
-            origins,
-            sides,
-            patch_sides,
-            found.normal,
-            found.offset,
-            found.center,
-            found.radius,
-            found.hull,
-            found.hull_ptr,
-            found.band,
-            centre,
-            reach,
-        )
-        fast = kernels.shaft_clear(*args)
-        np.testing.assert_array_equal(fast, kernels.numpy_shaft_clear(*args))
-        if trial == 0:
-            assert 0 < fast.sum() < len(fast)  # both outcomes are exercised
+        if trial % 2:  # a folded patch: no outline
+            points = rng.uniform(0.0, 1.0, size=(6, 3))
+            end, patch_sides = _folded_end(points), found.patch_sides(points, None, 1e-5)
+        else:  # a planar quad, small or large
+            a, u, v = rng.uniform(0.0, 1.0, 3), *rng.normal(scale=0.05 * (trial + 1), size=(2, 3))
+            quad = np.array([a, a + u, a + u + v, a + v])
+            end = _quad_end(quad)
+            patch_sides = found.patch_sides(quad, end.normal, 1e-5)
+        args = _shaft_args(found, origins, patch_sides, end)
+        fast = shafts.shaft_clear(*args)
+        np.testing.assert_array_equal(fast, shafts.numpy_shaft_clear(*args))
+        outcomes |= set(fast.tolist())
+    assert outcomes == {False, True}  # both outcomes are exercised
 
 
-def furniture_room(seed: int, blocks: int = 4) -> Scene:
-    """A 4 x 3 x 4 m room lit from a ceiling panel, with randomly turned blocks on the floor
-    and a tilted double-sided plate floating in it (y up)."""
-    rng = np.random.default_rng(seed)
-    s, h = 4.0, 3.0
-    room = np.array(
-        [
-            [[0, 0, 0], [0, 0, s], [s, 0, s], [s, 0, 0]],  # floor
-            [[0, h, 0], [s, h, 0], [s, h, s], [0, h, s]],  # ceiling
-            [[0, 0, 0], [s, 0, 0], [s, h, 0], [0, h, 0]],
-            [[0, 0, s], [0, h, s], [s, h, s], [s, 0, s]],
-            [[0, 0, 0], [0, h, 0], [0, h, s], [0, 0, s]],
-            [[s, 0, 0], [s, 0, s], [s, h, s], [s, h, 0]],
-        ],
-        dtype=float,
+#: A sheet beside the shaft, in a plane between the receivers and the patch: its
+#: bounding sphere meets every capsule and the patch's ball reaches into the pyramid
+#: through it, but the patch's corners do not (the separating planes' case).
+BESIDE = quad_triangles(
+    np.array([[0.6, -1.0, 2.0], [3.0, -1.0, 2.0], [3.0, 3.0, 2.0], [0.6, 3.0, 2.0]])
+)
+
+
+@pytest.mark.parametrize("case", [*CASES, "sheet beside the shaft"])
+def test_constructed_cases_are_clear_only_where_no_segment_is_blocked(case: str) -> None:
+    """The blockers' constructed cases (a receiver peeking past an occluder's edge, a thin
+    occluder between parallel plates, one touching the shaft's boundary, one wholly
+    inside the shaft) and a sheet beside the shaft: Embree finds no blocked segment from a
+    receiver called clear to 256 random targets and the corners of its patch."""
+    if case == "sheet beside the shaft":
+        geometry, quad, origins = BESIDE, PLATE, SWEEP * [0.5, 1, 1]
+    else:  # the receivers farther out, where they look past the occluder
+        geometry, quad, origins, _ = CASES[case]
+        origins = origins * [3, 1, 1]
+    occluder = Occluder(*join(geometry, quad_triangles(quad)))
+    found = facets(*geometry, DIAGONAL)
+    assert found is not None
+    end = _quad_end(quad, LIFT)
+    args = _shaft_args(found, origins, found.patch_sides(quad, end.normal, LIFT), end)
+    clear = shafts.shaft_clear(*args)
+    np.testing.assert_array_equal(clear, shafts.numpy_shaft_clear(*args))
+    targets = np.concatenate(
+        [quad + LIFT * end.normal, quad_targets(quad, 256, np.random.default_rng(2))]
     )
-    quads = list(room)
-    facing = [(0, 1, 0), (0, -1, 0), (0, 0, 1), (0, 0, -1), (1, 0, 0), (-1, 0, 0)]
-    material = ["wall"] * 6
-    light = np.array(
-        [[1.5, h - 0.01, 1.5], [2.5, h - 0.01, 1.5], [2.5, h - 0.01, 2.5], [1.5, h - 0.01, 2.5]]
-    )
-    quads.append(light)
-    facing.append((0, -1, 0))
-    material.append("light")
-    for _ in range(blocks):
-        centre = rng.uniform(0.8, s - 0.8, size=2)
-        half = rng.uniform(0.15, 0.4)
-        angle = rng.uniform(0, np.pi / 2)
-        offsets = half * np.array([[1, 1], [-1, 1], [-1, -1], [1, -1]], dtype=float)
-        c, si = np.cos(angle), np.sin(angle)
-        xz = centre + offsets @ np.array([[c, si], [-si, c]])
-        height = rng.uniform(0.3, 1.2)
-        base = np.column_stack([xz[:, 0], np.zeros(4), xz[:, 1]])
-        top = base + np.array([0.0, height, 0.0])
-        quads.append(top)
-        facing.append((0, 1, 0))
-        for k in range(4):
-            j = (k + 1) % 4
-            quads.append(np.array([base[k], base[j], top[j], top[k]]))
-            out = 0.5 * (base[k] + base[j]) - base.mean(axis=0)
-            facing.append(tuple(out))
-        material += ["block"] * 5
-    plate = np.array([[1.0, 1.6, 1.0], [2.0, 1.9, 1.0], [2.0, 1.9, 2.0], [1.0, 1.6, 2.0]])
-    quads.append(plate)
-    facing.append((0, -1, 0))
-    material.append("plate")
-    return quads_scene(
-        np.array(quads),
-        {
-            "wall": (0.6, 0.0, False),
-            "light": (0.0, 10.0, False),
-            "block": (0.5, 0.0, False),
-            "plate": (0.4, 0.0, True),
-        },
-        material,
-        np.array(facing, dtype=float),
-    )
+    for origin, free in zip(origins, clear, strict=True):
+        if free:
+            assert not trace(occluder, origin, targets).any(), (case, origin)
+    if case != "touching the shaft's boundary":
+        assert clear.any() and not clear.all()  # both outcomes occur
+    if case == "sheet beside the shaft":
+        # the patch's ball alone clears none of the middle receivers; its corners do
+        ball = _shaft_args(found, origins, found.patch_sides(quad, end.normal, LIFT), end)
+        ball = (*ball[:12], np.zeros((0, 3)), np.zeros((0, 3)), *ball[14:])
+        middle = np.abs(origins[:, 0]) < 0.2
+        assert not shafts.numpy_shaft_clear(*ball)[middle].any()
+        assert clear[middle].all()
 
 
 @pytest.fixture(scope="module", params=[1, 2])
@@ -222,8 +248,7 @@ def test_clear_pairs_have_no_blocked_segment(room: Prepared) -> None:
             engine._origins[receivers],
             engine._sides[receivers],
             pairs._patch_sides[patch],
-            mesh.patch_center[patch],
-            float(pairs._patch_reach[patch]),
+            pairs._ends[patch],
         )
         chosen = receivers[clear][:40]
         triangles = np.flatnonzero(mesh.triangle_patch == patch)
