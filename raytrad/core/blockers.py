@@ -50,7 +50,7 @@ import numpy as np
 
 from raytrad.constants import tol
 from raytrad.core import compiled
-from raytrad.core.shafts import _plane_hull
+from raytrad.core.shafts import plane_hull
 from raytrad.scene.model import triangle_areas_normals
 
 log = logging.getLogger(__name__)
@@ -338,14 +338,14 @@ def _sheet(
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
     """A planar component's sheet plane and outward edge planes, if its triangles cover
     their convex hull."""
-    hull = _plane_hull(points, normal)
+    hull = plane_hull(points, normal)
     following = np.roll(hull, -1, axis=0)
     hull_area = 0.5 * float(
         np.linalg.norm(np.cross(hull - hull[0], following - hull[0]).sum(axis=0))
     )
     if abs(hull_area - area) > 1e-9 * max(area, 1e-300) + flat * np.sqrt(area):
         return None
-    # _plane_hull winds counter-clockwise about ``normal``: edge x normal points outward
+    # plane_hull winds counter-clockwise about ``normal``: edge x normal points outward
     edge = following - hull
     outward = np.cross(edge, normal)
     outward /= np.linalg.norm(outward, axis=1)[:, None]
@@ -356,15 +356,20 @@ def _sheet(
     )
 
 
+def prism(hull: np.ndarray, normal: np.ndarray, lift: float) -> np.ndarray:
+    """(2 K, 3) a planar patch's convex ``hull`` (K, 3) moved ``2 lift`` both ways along
+    its ``normal``: the :func:`target_corners` of the patch [m]."""
+    return np.concatenate([hull + 2.0 * lift * normal, hull - 2.0 * lift * normal])
+
+
 def target_corners(vertices: np.ndarray, normal: np.ndarray | None, lift: float) -> np.ndarray:
     """(V', 3) corners of a convex set that holds every ray target of a patch: the convex
     hull of its vertices moved ``2 lift`` both ways along its normal (``normal`` None, a
     folded patch: each vertex moved ``2 lift`` along each axis both ways)."""
     if normal is not None:
-        hull = _plane_hull(vertices, normal)
-        return np.concatenate([hull + 2.0 * lift * normal, hull - 2.0 * lift * normal])
+        return prism(plane_hull(vertices, normal), normal, lift)
     cube = 2.0 * lift * np.array(np.meshgrid([-1, 1], [-1, 1], [-1, 1])).reshape(3, -1).T
     return (np.unique(vertices, axis=0)[:, None, :] + cube[None, :, :]).reshape(-1, 3)
 
 
-__all__ = ["Blockers", "blockers", "numpy_blocked", "target_corners"]
+__all__ = ["Blockers", "blockers", "numpy_blocked", "prism", "target_corners"]

@@ -19,10 +19,12 @@ def group(labels: np.ndarray, count: int) -> tuple[np.ndarray, np.ndarray]:
 
 def patch_vertices(mesh: RadiosityMesh) -> tuple[np.ndarray, np.ndarray]:
     """The distinct vertices of each patch's triangles, grouped by patch (CSR)."""
+    stride = np.int64(len(mesh.positions))
     key = np.unique(
-        np.stack([np.repeat(mesh.triangle_patch, 3), mesh.triangles.reshape(-1)], axis=1), axis=0
+        np.repeat(mesh.triangle_patch, 3).astype(np.int64) * stride + mesh.triangles.reshape(-1)
     )
-    return key[:, 1], np.searchsorted(key[:, 0], np.arange(mesh.patch_count + 1))
+    patch = key // stride  # sorted by patch, then vertex
+    return key % stride, np.searchsorted(patch, np.arange(mesh.patch_count + 1))
 
 
 def boundary_edges(
@@ -53,14 +55,27 @@ def boundary_edges(
     a = tri.reshape(-1)
     b = np.roll(tri, -1, axis=1).reshape(-1)
     patch = np.repeat(labels[labels >= 0], 3)
-    key = np.stack([patch, np.minimum(a, b), np.maximum(a, b)], axis=1)
-    _, inverse, counts = np.unique(key, axis=0, return_inverse=True, return_counts=True)
-    single = counts[inverse.reshape(-1)] == 1
+    single = _row_counts(patch, np.minimum(a, b), np.maximum(a, b)) == 1
     order = np.argsort(patch[single], kind="stable")
     a, b, patch = a[single][order], b[single][order], patch[single][order]
     a, b, patch = _merge_collinear(mesh.positions, a, b, patch)
     pointer = np.searchsorted(patch, np.arange(count + 1))
     return mesh.positions[a], mesh.positions[b], pointer
+
+
+def _row_counts(*columns: np.ndarray) -> np.ndarray:
+    """(N,) int64: how many rows of the integer ``columns`` equal each row (a row-wise
+    ``np.unique(..., return_counts=True)`` read back per row, by one lexicographic sort)."""
+    order = np.lexsort(columns[::-1])
+    change = np.zeros(len(order), dtype=bool)
+    change[:1] = True
+    for column in columns:
+        ranked = column[order]
+        change[1:] |= ranked[1:] != ranked[:-1]
+    run = np.cumsum(change) - 1
+    out = np.empty(len(order), dtype=np.int64)
+    out[order] = np.bincount(run)[run]
+    return out
 
 
 @dataclass(frozen=True)

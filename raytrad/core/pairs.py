@@ -23,7 +23,7 @@ import numpy as np
 
 from raytrad.constants import tol
 from raytrad.core import compiled
-from raytrad.core.blockers import Blockers, blockers, target_corners
+from raytrad.core.blockers import Blockers, blockers, prism, target_corners
 from raytrad.core.clusters import disk_factors, runs
 from raytrad.core.contour import piecewise_contour_form_factor, planar_contour_form_factor
 from raytrad.core.gather import (
@@ -43,7 +43,7 @@ from raytrad.core.kernels import (
 )
 from raytrad.core.mesh import RadiosityMesh
 from raytrad.core.outline import boundary_edges, folded_pieces, patch_vertices
-from raytrad.core.shafts import Facets, ShaftEnd, facets, shaft_end
+from raytrad.core.shafts import Facets, ShaftEnd, facets, plane_hull, shaft_end
 from raytrad.core.spread import RULE_POINTS, RULE_WEIGHTS, GatherShares, corner_form_factors
 from raytrad.core.visibility import Occluder
 
@@ -121,10 +121,13 @@ class PairFactors:
         about its centre that holds them."""
         m, lift = self.mesh, tol.ray_offset * self.diagonal
         pieces, parts = self._pieces, []
+        #: each planar patch's convex outline (None for a folded one)
+        self._hulls: list[np.ndarray | None] = [None] * m.patch_count
         for p in range(m.patch_count):
             if m.patch_planar[p]:
                 outline = self._edge_start[self._edge_ptr[p] : self._edge_ptr[p + 1]]
-                parts.append(target_corners(outline, m.patch_normal[p], lift))
+                self._hulls[p] = plane_hull(outline, m.patch_normal[p])
+                parts.append(prism(self._hulls[p], m.patch_normal[p], lift))
             else:
                 first, last = (
                     pieces.edge_ptr[pieces.patch_ptr[p]],
@@ -140,11 +143,11 @@ class PairFactors:
     def _shaft_end(self, patch: int) -> ShaftEnd:
         """The patch's end of its shafts (:func:`~raytrad.core.shafts.shaft_end`)."""
         m, lift = self.mesh, tol.ray_offset * self.diagonal
-        a, b = self._edge_ptr[patch], self._edge_ptr[patch + 1]
+        hull = self._hulls[patch]
         return shaft_end(
             m.positions[self._vert_index[self._vert_ptr[patch] : self._vert_ptr[patch + 1]]],
-            self._edge_start[a:b],
-            m.patch_normal[patch] if m.patch_planar[patch] else None,
+            np.zeros((0, 3)) if hull is None else hull,
+            None if hull is None else m.patch_normal[patch],
             m.patch_center[patch],
             float(m.patch_radius[patch] + lift + tol.horizon * self.diagonal),
             self._corners[self._corner_ptr[patch] : self._corner_ptr[patch + 1]],

@@ -205,16 +205,17 @@ class ShaftEnd:
 
 def shaft_end(
     vertices: np.ndarray,
-    outline: np.ndarray,
+    hull: np.ndarray,
     normal: np.ndarray | None,
     center: np.ndarray,
     reach: float,
     targets: np.ndarray,
     lift: float,
 ) -> ShaftEnd:
-    """The :class:`ShaftEnd` of a patch from its vertices (V, 3), its outline's corners,
-    its normal (None: a folded patch, which gets no outline), its ball, the corners of a
-    convex set holding its ray targets and their lift [m]."""
+    """The :class:`ShaftEnd` of a patch from its vertices (V, 3), its convex outline in
+    order (``hull``, :func:`plane_hull` of its outline's corners), its normal (None: a
+    folded patch, which gets no outline), its ball, the corners of a convex set holding
+    its ray targets and their lift [m]."""
     if normal is None:
         return ShaftEnd(center, reach, targets, np.zeros((0, 3)), np.zeros(3), lift, 0.0, 0.0)
     heights = np.asarray(vertices, dtype=np.float64) @ normal
@@ -222,7 +223,7 @@ def shaft_end(
         center,
         reach,
         targets,
-        _plane_hull(np.asarray(outline, dtype=np.float64), normal),
+        np.asarray(hull, dtype=np.float64),
         np.asarray(normal, dtype=np.float64),
         lift,
         float(heights.min()),
@@ -283,7 +284,7 @@ def facets(positions: np.ndarray, triangles: np.ndarray, diagonal: float) -> Fac
     reach = np.linalg.norm(corners - center[group][:, None, :], axis=2).max(axis=1)
     radius = np.zeros(count)
     np.maximum.at(radius, group, reach)
-    hulls = [_plane_hull(corners[group == q].reshape(-1, 3), n[q]) for q in range(count)]
+    hulls = [plane_hull(corners[group == q].reshape(-1, 3), n[q]) for q in range(count)]
     hull_ptr = np.concatenate([[0], np.cumsum([len(h) for h in hulls])]).astype(np.int64)
     return Facets(
         n,
@@ -505,13 +506,17 @@ def _floats(array: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(array, dtype=np.float64)
 
 
-def _plane_hull(points: np.ndarray, normal: np.ndarray) -> np.ndarray:
+def plane_hull(points: np.ndarray, normal: np.ndarray) -> np.ndarray:
     """(K, 3) the convex hull of coplanar points, counter-clockwise about ``normal``
     (Andrew's monotone chain on the plane's coordinates)."""
     u = np.cross(normal, np.eye(3)[np.abs(normal).argmin()])
     u /= np.linalg.norm(u)
     v = np.cross(normal, u)
-    uv = np.unique(np.stack([points @ u, points @ v], axis=1), axis=0)  # sorted by u, v
+    uv = np.stack([points @ u, points @ v], axis=1)
+    uv = uv[np.lexsort((uv[:, 1], uv[:, 0]))]  # sorted by u, v, each point once
+    first = np.ones(len(uv), dtype=bool)
+    first[1:] = (uv[1:] != uv[:-1]).any(axis=1)
+    uv = uv[first]
     index = np.arange(len(uv))
 
     def chain(order: np.ndarray) -> list[int]:
@@ -546,6 +551,7 @@ __all__ = [
     "ShaftEnd",
     "facets",
     "numpy_shaft_clear",
+    "plane_hull",
     "shaft_clear",
     "shaft_end",
 ]
