@@ -126,8 +126,9 @@ class PairFactors:
         for p in range(m.patch_count):
             if m.patch_planar[p]:
                 outline = self._edge_start[self._edge_ptr[p] : self._edge_ptr[p + 1]]
-                self._hulls[p] = plane_hull(outline, m.patch_normal[p])
-                parts.append(prism(self._hulls[p], m.patch_normal[p], lift))
+                hull = plane_hull(outline, m.patch_normal[p])
+                self._hulls[p] = hull
+                parts.append(prism(hull, m.patch_normal[p], lift))
             else:
                 first, last = (
                     pieces.edge_ptr[pieces.patch_ptr[p]],
