@@ -20,6 +20,8 @@ KERNELS = (
     "clipped_factor",
     "polygon_form_factor",
     "outline_factor",
+    "_successors",
+    "_unit_outline_factor",
     "contour_form_factor",
     "clipped_outline",
     "clipped_contour_form_factor",
@@ -113,6 +115,46 @@ def outline_factor(start, end, x, n):
     return abs(total) / (2.0 * math.pi)
 
 
+def _successors(start, end):
+    """(E,) int64: for each edge, an edge that starts where it ends (-1: none)."""
+    count = len(start)
+    out = np.full(count, -1, dtype=np.int64)
+    for e in range(count):
+        for k in range(count):
+            if start[k, 0] == end[e, 0] and start[k, 1] == end[e, 1] and start[k, 2] == end[e, 2]:
+                out[e] = k
+                break
+    return out
+
+
+def _unit_outline_factor(start, end, successor, x, n, unit):
+    """:func:`outline_factor` with each corner's direction from ``x`` normalised once
+    (into the (E, 3) scratch ``unit``) and read at both its edges: the same terms, bit
+    for bit, in the same order."""
+    for k in range(len(start)):
+        ux, uy, uz = start[k, 0] - x[0], start[k, 1] - x[1], start[k, 2] - x[2]
+        lu = max(math.sqrt(ux * ux + uy * uy + uz * uz), 1e-300)
+        unit[k, 0], unit[k, 1], unit[k, 2] = ux / lu, uy / lu, uz / lu
+    total = 0.0
+    for e in range(len(start)):
+        ux, uy, uz = unit[e, 0], unit[e, 1], unit[e, 2]
+        k = successor[e]
+        if k >= 0:
+            vx, vy, vz = unit[k, 0], unit[k, 1], unit[k, 2]
+        else:
+            vx, vy, vz = end[e, 0] - x[0], end[e, 1] - x[1], end[e, 2] - x[2]
+            lv = max(math.sqrt(vx * vx + vy * vy + vz * vz), 1e-300)
+            vx, vy, vz = vx / lv, vy / lv, vz / lv
+        cx = uy * vz - uz * vy
+        cy = uz * vx - ux * vz
+        cz = ux * vy - uy * vx
+        sin = math.sqrt(cx * cx + cy * cy + cz * cz)
+        if sin > 0.0:
+            gamma = math.atan2(sin, ux * vx + uy * vy + uz * vz)
+            total += gamma * ((cx * n[0] + cy * n[1] + cz * n[2]) / sin)
+    return abs(total) / (2.0 * math.pi)
+
+
 def contour_form_factor(start, end, points, normals):
     out = np.empty(len(points))
     for i in range(len(points)):
@@ -167,6 +209,8 @@ def planar_contour_form_factor(start, end, points, normals, patch_normal, patch_
     clipped outline's where it straddles (see
     :func:`raytrad.core.contour.numpy_planar_contour_form_factor`, the reference)."""
     out = np.zeros(len(points))
+    successor = _successors(start, end)
+    unit = np.empty((len(start), 3))
     for i in range(len(points)):
         x, n = points[i], normals[i]
         front = (
@@ -184,7 +228,7 @@ def planar_contour_form_factor(start, end, points, normals, patch_normal, patch_
         if not top > band:
             continue
         if low >= -band:
-            out[i] = outline_factor(start, end, x, n)
+            out[i] = _unit_outline_factor(start, end, successor, x, n, unit)
         else:
             out[i] = clipped_outline(start, end, 0, len(start), x, n)
     return out
@@ -346,6 +390,8 @@ def visible_factors(unoccluded, doubt, weight, far_hidden, near_c, near_w, near_
     total = np.zeros(len(unoccluded))
     hidden = np.zeros(len(unoccluded))
     for c in range(weight.shape[0]):
+        if not doubt[c]:  # its factor is the unoccluded one: no sum needed
+            continue
         for s in range(weight.shape[1]):
             total[c] += weight[c, s]
             if far_hidden[c, s]:

@@ -10,6 +10,7 @@ import pytest
 from raytrad.constants import tol
 from raytrad.core import compiled
 from raytrad.core import pairs as pairs_module
+from raytrad.core.contour import numpy_planar_contour_form_factor, planar_contour_form_factor
 from raytrad.core.kernels import numpy_facing_triangle_sums
 from raytrad.core.mesh import MeshSettings, RadiosityMesh, build_mesh
 from raytrad.core.pairs import PairFactors
@@ -190,3 +191,47 @@ def test_compiled_near_field_matches_numpy_through_cluster_trees() -> None:
         d = np.linalg.norm(x[want[5]] - tree.point[want[6]], axis=1)
         assert np.all(d > pairs_module.NEAR_FACTOR * tree.size[want[6]])
     assert clusters > 1000 and triangles > 1000, (clusters, triangles)
+
+
+@pytest.mark.skipif(compiled.get() is None, reason="needs the compiled kernels")
+def test_compiled_outline_sum_reads_each_corner_at_both_its_edges() -> None:
+    """The compiled sum normalises each corner's direction once and reads it at the edge
+    that ends there too: an outline listed out of order (a square with a hole, the
+    edges shuffled) and one edge whose end starts no edge (the unmatched path) give the
+    numpy sum, and the whole square gives the closed-form factor of a parallel square."""
+    outer = np.array([[0, 0, 1], [1, 0, 1], [1, 1, 1], [0, 1, 1.0]])
+    inner = np.array([[0.3, 0.3, 1], [0.3, 0.6, 1], [0.6, 0.6, 1], [0.6, 0.3, 1.0]])
+    start = np.concatenate([outer, inner])
+    end = np.concatenate([np.roll(outer, -1, axis=0), np.roll(inner, -1, axis=0)])
+    order = np.random.default_rng(6).permutation(len(start))
+    start, end = start[order], end[order]
+    normal, center = np.array([0.0, 0.0, -1.0]), start.mean(axis=0)
+    rng = np.random.default_rng(7)
+    x = np.column_stack([rng.uniform(-1, 2, (400, 2)), rng.uniform(-1, 0.9, 400)])
+    n = rng.normal(size=(400, 3))
+    n[:200] = [0.0, 0.0, 1.0]  # facing the square: every corner above the horizon
+    n /= np.linalg.norm(n, axis=1)[:, None]
+    loose = end.copy()
+    loose[0, 1] += 0.05  # one edge ends where no edge starts
+    for s, e in ((start, end), (start, loose)):
+        got = planar_contour_form_factor(s, e, x, n, normal, center, 1e-12)
+        want = numpy_planar_contour_form_factor(s, e, x, n, normal, center, 1e-12)
+        np.testing.assert_allclose(got, want, rtol=0, atol=AGREE)
+        assert (got[:200] > 0).all()
+    # a point under a corner of a parallel unit square a unit away (closed form for a
+    # differential area to a parallel rectangle with a corner above it, A = B = 1)
+    square = planar_contour_form_factor(
+        outer,
+        np.roll(outer, -1, axis=0),
+        np.zeros((1, 3)),
+        np.array([[0.0, 0.0, 1.0]]),
+        normal,
+        outer.mean(axis=0),
+        1e-12,
+    )
+    a = b = 1.0
+    exact = (
+        a / np.sqrt(1 + a * a) * np.arctan(b / np.sqrt(1 + a * a))
+        + b / np.sqrt(1 + b * b) * np.arctan(a / np.sqrt(1 + b * b))
+    ) / (2 * np.pi)
+    assert square[0] == pytest.approx(exact, rel=1e-12)
