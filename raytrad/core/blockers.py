@@ -356,18 +356,22 @@ def _sheet(
     )
 
 
-def prism(hull: np.ndarray, normal: np.ndarray, lift: float) -> np.ndarray:
-    """(2 K, 3) a planar patch's convex ``hull`` (K, 3) moved ``2 lift`` both ways along
-    its ``normal``: the :func:`target_corners` of the patch [m]."""
-    return np.concatenate([hull + 2.0 * lift * normal, hull - 2.0 * lift * normal])
+def prism(hull: np.ndarray, normal: np.ndarray, height: float) -> np.ndarray:
+    """(2 K, 3) a planar patch's convex ``hull`` (K, 3) moved ``height`` both ways along
+    its ``normal`` [m]: with ``height`` twice the ray targets' lift plus the patch's own
+    height range, a convex set that holds every ray target (:func:`target_corners`)."""
+    return np.concatenate([hull + height * normal, hull - height * normal])
 
 
 def target_corners(vertices: np.ndarray, normal: np.ndarray | None, lift: float) -> np.ndarray:
     """(V', 3) corners of a convex set that holds every ray target of a patch: the convex
-    hull of its vertices moved ``2 lift`` both ways along its normal (``normal`` None, a
-    folded patch: each vertex moved ``2 lift`` along each axis both ways)."""
+    hull of its vertices moved ``2 lift`` (plus their own height range along the normal: a
+    patch counts as planar by its normals alone) both ways along its normal (``normal``
+    None, a folded patch: each vertex moved ``2 lift`` along each axis both ways)."""
     if normal is not None:
-        return prism(plane_hull(vertices, normal), normal, lift)
+        heights = np.asarray(vertices, dtype=np.float64) @ normal
+        thick = float(heights.max() - heights.min())
+        return prism(plane_hull(vertices, normal), normal, 2.0 * lift + thick)
     cube = 2.0 * lift * np.array(np.meshgrid([-1, 1], [-1, 1], [-1, 1])).reshape(3, -1).T
     return (np.unique(vertices, axis=0)[:, None, :] + cube[None, :, :]).reshape(-1, 3)
 

@@ -125,10 +125,14 @@ class PairFactors:
         self._hulls: list[np.ndarray | None] = [None] * m.patch_count
         for p in range(m.patch_count):
             if m.patch_planar[p]:
+                normal = m.patch_normal[p]
                 outline = self._edge_start[self._edge_ptr[p] : self._edge_ptr[p + 1]]
-                hull = plane_hull(outline, m.patch_normal[p])
+                hull = plane_hull(outline, normal)
                 self._hulls[p] = hull
-                parts.append(prism(hull, m.patch_normal[p], lift))
+                # planar by its normals: its corners may still spread a little in height
+                heights = m.positions[self._vert_index[self._vert_ptr[p] : self._vert_ptr[p + 1]]]
+                thick = float(np.ptp(heights @ normal))
+                parts.append(prism(hull, normal, 2.0 * lift + thick))
             else:
                 first, last = (
                     pieces.edge_ptr[pieces.patch_ptr[p]],

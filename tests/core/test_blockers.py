@@ -226,3 +226,17 @@ def test_a_sliver_that_welds_away_leaves_the_box_a_blocker() -> None:
     )
     assert found is not None and found.count == 1
     assert np.isfinite(found.normal).all()
+
+
+def test_target_corners_hold_a_patch_planar_by_its_normals_alone() -> None:
+    """A patch counts as planar when its normals agree within ``tol.parallel`` (about
+    4.5e-5 rad), so its corners may spread in height by more than a ray's lift over a
+    patch of the scene's size: the target prism reaches over that spread too."""
+    normal = np.array([0.0, 0.0, 1.0])
+    quad = np.array([[0, 0, 0], [10, 0, 0], [10, 10, 4e-4], [0, 10, 4e-4]])  # 4e-5 rad
+    corners = bl.target_corners(quad, normal, LIFT)
+    targets = quad + LIFT * normal  # the highest targets, and the lowest ray ends below
+    heights = corners @ normal
+    assert heights.max() >= (targets @ normal).max() + LIFT
+    assert heights.min() <= (quad @ normal).min() - LIFT
+    assert 4e-4 > 2 * LIFT  # the spread is larger than the lift margin alone
