@@ -15,6 +15,7 @@ import numpy as np
 
 #: Every function to compile, each after the helpers it calls.
 KERNELS = (
+    "_unit_edge_term",
     "edge_term",
     "lambert",
     "clipped_factor",
@@ -42,8 +43,11 @@ def edge_term(ux, uy, uz, vx, vy, vz, n):
     (a term of :func:`raytrad.core.kernels.edge_sum`; 0 for an edge through the receiver)."""
     lu = max(math.sqrt(ux * ux + uy * uy + uz * uz), 1e-300)
     lv = max(math.sqrt(vx * vx + vy * vy + vz * vz), 1e-300)
-    ux, uy, uz = ux / lu, uy / lu, uz / lu
-    vx, vy, vz = vx / lv, vy / lv, vz / lv
+    return _unit_edge_term(ux / lu, uy / lu, uz / lu, vx / lv, vy / lv, vz / lv, n)
+
+
+def _unit_edge_term(ux, uy, uz, vx, vy, vz, n):
+    """:func:`edge_term` of unit directions u and v."""
     cx = uy * vz - uz * vy
     cy = uz * vx - ux * vz
     cz = ux * vy - uy * vx
@@ -145,13 +149,7 @@ def _unit_outline_factor(start, end, successor, x, n, unit):
             vx, vy, vz = end[e, 0] - x[0], end[e, 1] - x[1], end[e, 2] - x[2]
             lv = max(math.sqrt(vx * vx + vy * vy + vz * vz), 1e-300)
             vx, vy, vz = vx / lv, vy / lv, vz / lv
-        cx = uy * vz - uz * vy
-        cy = uz * vx - ux * vz
-        cz = ux * vy - uy * vx
-        sin = math.sqrt(cx * cx + cy * cy + cz * cz)
-        if sin > 0.0:
-            gamma = math.atan2(sin, ux * vx + uy * vy + uz * vz)
-            total += gamma * ((cx * n[0] + cy * n[1] + cz * n[2]) / sin)
+        total += _unit_edge_term(ux, uy, uz, vx, vy, vz, n)
     return abs(total) / (2.0 * math.pi)
 
 

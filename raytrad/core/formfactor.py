@@ -145,6 +145,8 @@ class FormFactorEngine:
         diag = scene_diagonal(mesh.positions)
         self.diagonal = diag
         self._points, self._origins = receiver_points(mesh, tol.ray_offset * diag)
+        #: each receiver's height along its normal (its horizon plane's offset) [m]
+        self._levels = np.einsum("ij,ij->i", mesh.receiver_normal, self._points)
         self.cull = cull
         self._pairs = (
             PairFactors(mesh, occluder, diag, cull) if pairs is None else pairs.refined(mesh)
@@ -472,10 +474,12 @@ class FormFactorEngine:
         ``patch`` (cheap conservative culling)."""
         m = self.mesh
         if x is None or nx is None:
-            x, nx = self._points, m.receiver_normal
+            x, nx, levels = self._points, m.receiver_normal, self._levels
+        else:
+            levels = np.einsum("ij,ij->i", nx, x)
         center, radius = m.patch_center[patch], m.patch_radius[patch]
         band = tol.horizon * self.diagonal
-        facing = (nx @ center - np.einsum("ij,ij->i", nx, x)) > -radius
+        facing = (nx @ center - levels) > -radius
         if m.patch_planar[patch]:
             normal = m.patch_normal[patch]
             facing &= (x - center) @ normal > band
