@@ -341,10 +341,14 @@ def test_time_limit_bounds_the_form_factor_pass(
     ends gives the direct light, a report, a PLY and a checkpoint, and says so."""
     out = tmp_path / "out"
     argv = ["render", str(SCENES / "cornell-box.obj"), "-o", str(out), "--receivers", "1500"]
-    status, _, _ = run_cli([*argv, "--patches", "80", "--time-limit", "0.001"], capsys)
+    status, summary, _ = run_cli([*argv, "--patches", "80", "--time-limit", "0.001"], capsys)
     assert status == 0
     report = json.loads((out / "report.json").read_text())
     assert report["statistics"]["form_factor_balance"]["complete"] is False
+    # refinement had no time left either, and the report and the summary say so
+    assert report["refinement"]["stopped"] is True
+    assert report["refinement"]["receivers_added"] == 0
+    assert "refined    nothing: the time limit or an interrupt came first" in summary
     assert "form-factor pass stopped after" in caplog.text
     solve = report["solve"]
     assert solve["stop_reason"] == "time-limit"

@@ -146,14 +146,17 @@ def _print_summary(report: dict[str, Any], outputs: dict[str, Path]) -> None:
             f"physical answer, {error['dominant']} dominates ({parts})"
         )
     refinement = report.get("refinement") or {}
+    cut = "; stopped early by the time limit or an interrupt" if refinement.get("stopped") else ""
     if refinement.get("receivers_added"):
         lines.append(
             f"refined    +{refinement['receivers_added']} receivers in "
             f"{refinement['rounds']} rounds (solved {refinement['receivers_solved']}; "
             f"{refinement['rays']} rays, "
             f"{_share(refinement['rays'], refinement['rays_naive'])} of "
-            f"{refinement['rays_naive']} without culling)"
+            f"{refinement['rays_naive']} without culling{cut})"
         )
+    elif cut:
+        lines.append("refined    nothing: the time limit or an interrupt came first")
     lines += [f"wrote      {path}" for path in outputs.values()]
     print("\n".join(lines))
 

@@ -119,6 +119,9 @@ class Refinement:
         Visibility rays the new receivers' gathers cast, and the rays an unclassified
         caster would have cast (see
         :attr:`~raytrad.core.formfactor.FormFactorEngine.rays_naive`).
+    stopped : bool
+        The time limit or an interrupt stopped it before its last round: the mesh is
+        coarser than an uninterrupted run's.
     """
 
     mesh: RadiosityMesh
@@ -129,6 +132,7 @@ class Refinement:
     change_rms: np.ndarray = field(default_factory=lambda: np.zeros(3))
     rays: int = 0
     rays_naive: int = 0
+    stopped: bool = False
 
 
 def refine_adaptively(
@@ -175,13 +179,15 @@ def refine_adaptively(
     found = np.zeros(mesh.receiver_count)  # see FOUND_SHARE: nothing found before round 1
     for _ in range(settings.rounds):
         if stop is not None and stop():
+            out.stopped = True
             if out.rounds:
-                log.info(
-                    "refinement stopped after %d rounds (time limit spent or interrupted)",
+                log.warning(
+                    "refinement stopped after %d rounds (time limit spent or interrupted): "
+                    "the mesh is coarser than a run without the limit makes",
                     out.rounds,
                 )
             else:
-                log.info("refinement skipped: time limit spent or interrupted")
+                log.warning("refinement skipped: time limit spent or interrupted")
             break
         room = budget - out.mesh.receiver_count
         order = _to_split(out.mesh, out.radiosity, settings, smallest, room, found)

@@ -130,6 +130,7 @@ def add_total_error(
         "change_rms": refinement.change_rms.tolist(),
         "rays": refinement.rays,
         "rays_naive": refinement.rays_naive,
+        "stopped": refinement.stopped,
     }
     return report
 

@@ -107,6 +107,7 @@ def test_furnace_report_with_reference_matches_the_schema(
     _validate(schema, load_strict(out / "report.json"))
     assert report["reference"]["kind"] == "analytic"
     assert report["solve"]["stop_reason"] == "converged"
+    assert report["refinement"]["stopped"] is False  # it ran to its end
 
 
 def test_shadow_report_without_reference_matches_the_schema(
