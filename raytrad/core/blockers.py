@@ -50,7 +50,7 @@ import numpy as np
 
 from raytrad.constants import tol
 from raytrad.core import compiled
-from raytrad.core.shafts import plane_hull
+from raytrad.core.shafts import plane_hull, prism
 from raytrad.scene.model import triangle_areas_normals
 
 log = logging.getLogger(__name__)
@@ -356,13 +356,6 @@ def _sheet(
     )
 
 
-def prism(hull: np.ndarray, normal: np.ndarray, height: float) -> np.ndarray:
-    """(2 K, 3) a planar patch's convex ``hull`` (K, 3) moved ``height`` both ways along
-    its ``normal`` [m]: with ``height`` twice the ray targets' lift plus the patch's own
-    height range, a convex set that holds every ray target (:func:`target_corners`)."""
-    return np.concatenate([hull + height * normal, hull - height * normal])
-
-
 def target_corners(vertices: np.ndarray, normal: np.ndarray | None, lift: float) -> np.ndarray:
     """(V', 3) corners of a convex set that holds every ray target of a patch: the convex
     hull of its vertices moved ``2 lift`` (plus their own height range along the normal: a
@@ -376,4 +369,4 @@ def target_corners(vertices: np.ndarray, normal: np.ndarray | None, lift: float)
     return (np.unique(vertices, axis=0)[:, None, :] + cube[None, :, :]).reshape(-1, 3)
 
 
-__all__ = ["Blockers", "blockers", "numpy_blocked", "prism", "target_corners"]
+__all__ = ["Blockers", "blockers", "numpy_blocked", "target_corners"]

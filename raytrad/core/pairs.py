@@ -23,7 +23,7 @@ import numpy as np
 
 from raytrad.constants import tol
 from raytrad.core import compiled
-from raytrad.core.blockers import Blockers, blockers, prism, target_corners
+from raytrad.core.blockers import Blockers, blockers, target_corners
 from raytrad.core.clusters import disk_factors, runs
 from raytrad.core.contour import piecewise_contour_form_factor, planar_contour_form_factor
 from raytrad.core.gather import (
@@ -108,56 +108,44 @@ class PairFactors:
                     for p, (a, b) in enumerate(itertools.pairwise(self._vert_ptr))
                 ]
             )
-            self._target_corners()
-            self._ends = [self._shaft_end(p) for p in range(mesh.patch_count)]
+            self._shaft_ends()
         self.blockers: Blockers | None = None
         if self.facets is not None and occluder is not None:  # (so also only compiled)
             self.blockers = blockers(occluder.positions, occluder.triangles, diagonal)
         self._triangle_tables()
 
-    def _target_corners(self) -> None:
-        """Each patch's :func:`~raytrad.core.blockers.target_corners` (CSR, from its
-        outline's corners, or its pieces' for a folded patch) and the radius of a ball
-        about its centre that holds them."""
-        m, lift = self.mesh, tol.ray_offset * self.diagonal
-        pieces, parts = self._pieces, []
-        #: each planar patch's convex outline (None for a folded one)
-        self._hulls: list[np.ndarray | None] = [None] * m.patch_count
-        for p in range(m.patch_count):
-            if m.patch_planar[p]:
-                normal = m.patch_normal[p]
-                outline = self._edge_start[self._edge_ptr[p] : self._edge_ptr[p + 1]]
-                hull = plane_hull(outline, normal)
-                self._hulls[p] = hull
-                # planar by its normals: its corners may still spread a little in height
-                heights = m.positions[self._vert_index[self._vert_ptr[p] : self._vert_ptr[p + 1]]]
-                thick = float(np.ptp(heights @ normal))
-                parts.append(prism(hull, normal, 2.0 * lift + thick))
-            else:
-                first, last = (
-                    pieces.edge_ptr[pieces.patch_ptr[p]],
-                    pieces.edge_ptr[pieces.patch_ptr[p + 1]],
-                )
-                parts.append(target_corners(pieces.start[first:last], None, lift))
-        self._corner_ptr = np.concatenate([[0], np.cumsum([len(c) for c in parts])])
-        self._corners = np.concatenate(parts)
+    def _shaft_ends(self) -> None:
+        """Each patch's end of its shafts (:func:`~raytrad.core.shafts.shaft_end`), and
+        its target corners as the convex blockers read them: CSR, with the radius of a
+        ball about the patch's centre that holds them."""
+        m = self.mesh
+        self._ends = [self._shaft_end(p) for p in range(m.patch_count)]
+        targets = [end.targets for end in self._ends]
+        self._corner_ptr = np.concatenate([[0], np.cumsum([len(t) for t in targets])])
+        self._corners = np.concatenate(targets)
         self._corner_reach = np.array(
-            [np.linalg.norm(c - m.patch_center[p], axis=1).max() for p, c in enumerate(parts)]
+            [np.linalg.norm(t - m.patch_center[p], axis=1).max() for p, t in enumerate(targets)]
         )
 
     def _shaft_end(self, patch: int) -> ShaftEnd:
-        """The patch's end of its shafts (:func:`~raytrad.core.shafts.shaft_end`)."""
+        """The patch's end of its shafts: a planar patch's from its outline's convex hull, a
+        folded patch's with the :func:`~raytrad.core.blockers.target_corners` of its
+        pieces' corners."""
         m, lift = self.mesh, tol.ray_offset * self.diagonal
-        hull = self._hulls[patch]
-        return shaft_end(
-            m.positions[self._vert_index[self._vert_ptr[patch] : self._vert_ptr[patch + 1]]],
-            np.zeros((0, 3)) if hull is None else hull,
-            None if hull is None else m.patch_normal[patch],
-            m.patch_center[patch],
-            float(m.patch_radius[patch] + lift + tol.horizon * self.diagonal),
-            self._corners[self._corner_ptr[patch] : self._corner_ptr[patch + 1]],
-            lift,
-        )
+        vertices = m.positions[self._vert_index[self._vert_ptr[patch] : self._vert_ptr[patch + 1]]]
+        center = m.patch_center[patch]
+        reach = float(m.patch_radius[patch] + lift + tol.horizon * self.diagonal)
+        if m.patch_planar[patch]:
+            normal = m.patch_normal[patch]
+            outline = self._edge_start[self._edge_ptr[patch] : self._edge_ptr[patch + 1]]
+            return shaft_end(
+                vertices, plane_hull(outline, normal), normal, center, reach, None, lift
+            )
+        pieces = self._pieces
+        first = pieces.edge_ptr[pieces.patch_ptr[patch]]
+        last = pieces.edge_ptr[pieces.patch_ptr[patch + 1]]
+        targets = target_corners(pieces.start[first:last], None, lift)
+        return shaft_end(vertices, np.zeros((0, 3)), None, center, reach, targets, lift)
 
     def _triangle_tables(self) -> None:
         """The tables that follow the mesh's triangles (rebuilt on a refined mesh)."""

@@ -47,6 +47,7 @@ import numpy as np
 
 from raytrad.constants import tol
 from raytrad.core import compiled
+from raytrad.core.kernels import _f64
 
 log = logging.getLogger(__name__)
 
@@ -209,26 +210,41 @@ def shaft_end(
     normal: np.ndarray | None,
     center: np.ndarray,
     reach: float,
-    targets: np.ndarray,
+    targets: np.ndarray | None,
     lift: float,
 ) -> ShaftEnd:
     """The :class:`ShaftEnd` of a patch from its vertices (V, 3), its convex outline in
     order (``hull``, :func:`plane_hull` of its outline's corners), its normal (None: a
     folded patch, which gets no outline), its ball, the corners of a convex set holding
-    its ray targets and their lift [m]."""
+    its ray targets and their lift [m].
+
+    ``targets`` None (a planar patch only): the hull moved ``2 lift`` plus the patch's
+    height range both ways along its normal (:func:`prism`; a patch counts as planar by
+    its normals alone, so its corners may spread a little in height).
+
+    Raises
+    ------
+    ValueError
+        A folded patch without ``targets``.
+    """
     if normal is None:
+        if targets is None:
+            raise ValueError("a folded patch's shaft end needs the corners of its targets")
         return ShaftEnd(center, reach, targets, np.zeros((0, 3)), np.zeros(3), lift, 0.0, 0.0)
     heights = np.asarray(vertices, dtype=np.float64) @ normal
-    return ShaftEnd(
-        center,
-        reach,
-        targets,
-        np.asarray(hull, dtype=np.float64),
-        np.asarray(normal, dtype=np.float64),
-        lift,
-        float(heights.min()),
-        float(heights.max() - heights.min()),
-    )
+    thick = float(heights.max() - heights.min())
+    hull = np.asarray(hull, dtype=np.float64)
+    normal = np.asarray(normal, dtype=np.float64)
+    if targets is None:
+        targets = prism(hull, normal, 2.0 * lift + thick)
+    return ShaftEnd(center, reach, targets, hull, normal, lift, float(heights.min()), thick)
+
+
+def prism(hull: np.ndarray, normal: np.ndarray, height: float) -> np.ndarray:
+    """(2 K, 3) a planar patch's convex ``hull`` (K, 3) moved ``height`` both ways along
+    its ``normal`` [m]: with ``height`` twice the ray targets' lift plus the patch's own
+    height range, a convex set that holds every ray target."""
+    return np.concatenate([hull + height * normal, hull - height * normal])
 
 
 def facets(positions: np.ndarray, triangles: np.ndarray, diagonal: float) -> Facets | None:
@@ -324,22 +340,22 @@ def shaft_clear(
     if fast is None:
         return numpy_shaft_clear(*args, band, patch_center, patch_reach, *end)
     return fast.shaft_clear(
-        _floats(origins),
+        _f64(origins),
         np.ascontiguousarray(sides, dtype=np.uint64),
         np.ascontiguousarray(patch_sides, dtype=np.uint64),
-        _floats(normals),
-        _floats(offsets),
-        _floats(centers),
-        _floats(radii),
-        _floats(hull),
+        _f64(normals),
+        _f64(offsets),
+        _f64(centers),
+        _f64(radii),
+        _f64(hull),
         np.ascontiguousarray(hull_ptr, dtype=np.int64),
         float(band),
-        _floats(patch_center),
+        _f64(patch_center),
         float(patch_reach),
-        _floats(targets).reshape(-1, 3),
-        _floats(outline).reshape(-1, 3),
-        _floats(patch_normal),
-        _floats(margins),
+        _f64(targets).reshape(-1, 3),
+        _f64(outline).reshape(-1, 3),
+        _f64(patch_normal),
+        _f64(margins),
     )
 
 
@@ -502,10 +518,6 @@ def _beyond_patch(
     return out
 
 
-def _floats(array: np.ndarray) -> np.ndarray:
-    return np.ascontiguousarray(array, dtype=np.float64)
-
-
 def plane_hull(points: np.ndarray, normal: np.ndarray) -> np.ndarray:
     """(K, 3) the convex hull of coplanar points, counter-clockwise about ``normal``
     (Andrew's monotone chain on the plane's coordinates)."""
@@ -552,6 +564,7 @@ __all__ = [
     "facets",
     "numpy_shaft_clear",
     "plane_hull",
+    "prism",
     "shaft_clear",
     "shaft_end",
 ]

@@ -289,3 +289,18 @@ def test_culled_pass_equals_tracing_every_pair(scene: str, room: Prepared, prepa
     finally:
         culled.close()
         every.close()
+
+
+def test_a_planar_shaft_end_holds_its_targets_and_a_folded_one_needs_them() -> None:
+    """A planar patch's default target corners reach two lifts plus its own height
+    spread (4e-4 m over 10 m, within ``tol.parallel`` of flat) above and below every
+    corner; a folded patch has no outline to build them from."""
+    quad = np.array([[0, 0, 0], [10, 0, 0], [10, 10, 4e-4], [0, 10, 4e-4]])
+    normal, lift = np.array([0.0, 0.0, 1.0]), 1e-4
+    end = shaft_end(quad, quad, normal, quad.mean(axis=0), 8.0, None, lift)
+    assert end.thick == pytest.approx(4e-4) and end.level == 0.0
+    heights = end.targets @ normal
+    assert heights.max() >= (quad @ normal).max() + 2 * lift
+    assert heights.min() <= (quad @ normal).min() - 2 * lift
+    with pytest.raises(ValueError, match="folded"):
+        shaft_end(quad, np.zeros((0, 3)), None, quad.mean(axis=0), 8.0, None, lift)
