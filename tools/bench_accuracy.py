@@ -264,6 +264,15 @@ def foot_probes(
     return Foot(probes, np.concatenate(weights), floor, sides, height, width, frames)
 
 
+def probe_set(scene: Scene, per_quad: int, along: int) -> Probes:
+    """The probes every accuracy table uses: :func:`area_probes` (seed 7) then
+    :func:`contact_probes`, in that order (the reference's cache key)."""
+    area = area_probes(scene, per_quad, np.random.default_rng(7))
+    contact = contact_probes(scene, along)
+    fields = ("points", "normals", "quad", "contact")
+    return Probes(*(np.concatenate([getattr(area, f), getattr(contact, f)]) for f in fields))
+
+
 def shut_in(scene: Scene, probes: Probes, rays: int = 256) -> np.ndarray:
     """(N,) bool: probes most of whose hemisphere is the back of single-sided surfaces (the
     ceiling in the gap behind the lamp). No one sees them; raytrad's error estimate skips
@@ -469,19 +478,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--json", type=Path, default=None, help="also write the table here")
     args = parser.parse_args(argv)
     scene = cornell_box()
-    rng = np.random.default_rng(7)
-    area = area_probes(scene, args.per_quad, rng)
-    contact = contact_probes(scene, args.along)
-    probes = Probes(
-        *(
-            np.concatenate([a, b])
-            for a, b in zip(
-                (area.points, area.normals, area.quad, area.contact),
-                (contact.points, contact.normals, contact.quad, contact.contact),
-                strict=True,
-            )
-        )
-    )
+    probes = probe_set(scene, args.per_quad, args.along)
     ref, ref_error = reference(scene, probes, args.paths, args.cache)
     probes.shut = shut_in(scene, probes)
     feet = foot_probes(scene, CORNELL_BLOCK_SIDES, CORNELL_FOOT, np.random.default_rng(8))

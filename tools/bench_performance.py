@@ -30,27 +30,42 @@ Three tables:
 from __future__ import annotations
 
 import argparse
+import contextlib
 import functools
+import io
 import json
 import os
 import subprocess
 import sys
 import tempfile
 import time
+from dataclasses import dataclass
 from pathlib import Path
+from types import SimpleNamespace
+from typing import Any
 
 import numpy as np
 
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(Path(__file__).resolve().parent))
 
+from raytrad.constants import scene_diagonal  # noqa: E402
 from raytrad.core import pairs, pipeline, solver  # noqa: E402
+from raytrad.core.hidden import fill_hidden  # noqa: E402
 from raytrad.core.mesh import MeshSettings  # noqa: E402
 from raytrad.core.pipeline import prepare  # noqa: E402
 from raytrad.core.visibility import Occluder  # noqa: E402
+from raytrad.formats.ply import read_radiosity_ply  # noqa: E402
+from raytrad.products.probe import PROBE_LIFT  # noqa: E402
+from raytrad.scene import triangle_areas_normals  # noqa: E402
 from raytrad.scene.builtin import cornell_box  # noqa: E402
 
 SCENE = ROOT / "scenes" / "cornell-box.obj"
+#: bench_accuracy's defaults (``--per-quad``, ``--along``, ``--paths``): its cached reference.
+PROBES_PER_QUAD, PROBES_ALONG, PATHS = 256, 8, 20000
+#: PLY vertices darker than this share of the median are taken as hidden (:func:`ply_at`).
+HIDDEN_LEVEL = 1e-3
 #: Runs argv[1:] and prints its peak resident memory [KiB] (Linux ru_maxrss).
 _MEASURE = (
     "import resource, subprocess, sys; subprocess.run(sys.argv[1:], check=True); "
@@ -195,8 +210,9 @@ def pass_table(receivers: int) -> None:
     )
 
 
-def render_once(raytrad: str, receivers: int) -> dict[str, float]:
-    """One ``raytrad render`` as a child: stage seconds, shots, rays, peak MiB, wall s."""
+def render_once(raytrad: str, receivers: int, truth: Truth | None) -> dict[str, float]:
+    """One ``raytrad render`` as a child: stage seconds, shots, rays, peak MiB, wall s;
+    with ``truth``, also its PLY's errors (``worst``, ``rms``, see :class:`Truth`)."""
     with tempfile.TemporaryDirectory() as out:
         # a small Python parent runs the render, so that the child's peak memory is its
         # own (a child forked from this process would count this process's memory too)
@@ -211,6 +227,7 @@ def render_once(raytrad: str, receivers: int) -> dict[str, float]:
         wall = time.perf_counter() - start
         peak_kib = float(done.stdout.split()[-1])
         report = json.loads((Path(out) / "report.json").read_text())
+        errors = {} if truth is None else truth.errors(Path(out) / f"{SCENE.stem}.ply")
     timings = report["timings_seconds"]
     return {
         "wall": wall,
@@ -221,44 +238,148 @@ def render_once(raytrad: str, receivers: int) -> dict[str, float]:
         "rays": report["solve"]["rays"],
         "receivers": report["statistics"]["receivers"],
         "peak_mib": peak_kib / 1024.0,
+        **errors,
     }
 
 
-def render_table(sizes: list[int], previous: str | None, runs: int) -> None:
+@dataclass
+class Truth:
+    """``tools/bench_accuracy.py``'s probes and cached path-traced reference (the race's,
+    ``tools/bench_race.py``): a render's worst-surface mean error and point-wise RMS,
+    reference noise removed, read from its PLY."""
+
+    probes: Any
+    reference: np.ndarray
+    reference_error: np.ndarray
+    quad_area: np.ndarray
+
+    @classmethod
+    def cornell(cls) -> Truth:
+        from bench_accuracy import probe_set, reference, shut_in
+
+        scene = cornell_box()
+        probes = probe_set(scene, PROBES_PER_QUAD, PROBES_ALONG)
+        ref, ref_error = reference(scene, probes, PATHS, ROOT / ".cache" / "accuracy")
+        probes.shut = shut_in(scene, probes)
+        area = triangle_areas_normals(scene.triangle_vertices())[0]
+        return cls(probes, ref, ref_error, area[0::2] + area[1::2])
+
+    def errors(self, ply: Path) -> dict[str, float]:
+        """``worst`` and ``rms`` [1] of the radiosity PLY ``ply`` at the probes."""
+        from bench_accuracy import report
+
+        got = ply_at(ply, self.probes.points, self.probes.normals)
+        with contextlib.redirect_stdout(io.StringIO()):
+            out = report("", got, self.reference, self.reference_error, self.probes, self.quad_area)
+        return {"worst": out["worst surface"], "rms": out["point RMS, reference noise removed"]}
+
+
+def ply_at(path: Path, points: np.ndarray, normals: np.ndarray) -> np.ndarray:
+    """(N, 3) radiosity of a radiosity PLY at surface points (N, 3) on the side their unit
+    ``normals`` face: its vertex values interpolated over the triangle under each point,
+    as :func:`raytrad.products.probe.radiosity_at` reads a mesh (NaN where no triangle
+    facing that way lies within ``PROBE_LIFT`` of the diagonal). Read from the file, so
+    that a render by any install, another release's too, is measured alike. The PLY holds
+    the solve's radiosity, hidden receivers (under a block) near their emission: vertices
+    below :data:`HIDDEN_LEVEL` of the median count as hidden (the Cornell box lights every
+    surface anyone sees far above that) and are filled as images and lightmaps fill them
+    (:func:`fill_hidden`)."""
+    positions, triangles, radiosity = read_radiosity_ply(path)
+    level = radiosity.max(axis=1)
+    seen = SimpleNamespace(
+        receiver_visible=level > HIDDEN_LEVEL * np.median(level), triangle_receivers=triangles
+    )
+    radiosity = fill_hidden(seen, radiosity)  # type: ignore[arg-type]
+    lift = PROBE_LIFT * scene_diagonal(positions)
+    _, facing = triangle_areas_normals(positions[triangles])
+    with Occluder(positions, triangles) as occluder:
+        origin = occluder.to_local(points + 2.0 * lift * normals)
+        hit, distance, weights = occluder.intersect_barycentric_local(origin, -normals)
+    out = np.full((len(points), 3), np.nan)
+    ok = (hit >= 0) & (np.abs(distance - 2.0 * lift) <= lift)
+    ok[ok] = np.einsum("ij,ij->i", facing[hit[ok]], normals[ok]) > 0
+    out[ok] = np.einsum("nk,nkc->nc", weights[ok], radiosity[triangles[hit[ok]]])
+    return out
+
+
+def render_table(sizes: list[int], previous: str | None, runs: int, truth: Truth | None) -> None:
     here = str(Path(sys.executable).parent / "raytrad")
     rows = []
     for receivers in sizes:
         now, old = [], []
         for _ in range(runs):  # alternate, so that drift hits both alike
-            now.append(render_once(here, receivers))
+            now.append(render_once(here, receivers, truth))
             if previous:
-                old.append(render_once(previous, receivers))
+                old.append(render_once(previous, receivers, truth))
         rows.append((receivers, now, old))
     print("\nwhole renders (child processes; medians of", runs, "runs)")
     head = (
         "| --receivers | receivers | wall s | form factors s | solve s | refine s | shots "
         "| rays | peak MiB |"
     )
+    if truth:
+        head += " worst surface % | point RMS % |"
     if previous:
         head += " previous wall s | now / previous |"
+        if truth:
+            head += " previous worst % | previous RMS % |"
     print(head)
     print("|" + "---|" * (head.count("|") - 1))
     for receivers, now, old in rows:
-        med = {k: float(np.median([r[k] for r in now])) for k in now[0]}
+        med = _medians(now)
         line = (
             f"| {receivers} | {med['receivers']:.0f} | {med['wall']:.1f} | "
             f"{med['form_factors']:.1f} | "
             f"{med['solve']:.1f} | {med['refine']:.1f} | {med['shots']:.0f} | {med['rays']:.3g} | "
             f"{med['peak_mib']:.0f} |"
         )
+        if truth:
+            line += f" {100 * med['worst']:.2f} | {100 * med['rms']:.2f} |"
         if old:
             ratio = np.median([a["wall"] / b["wall"] for a, b in zip(now, old, strict=True)])
-            line += f" {np.median([r['wall'] for r in old]):.1f} | {ratio:.2f} |"
+            line += f" {_medians(old)['wall']:.1f} | {ratio:.2f} |"
+            if truth:
+                line += f" {100 * _medians(old)['worst']:.2f} | {100 * _medians(old)['rms']:.2f} |"
         print(line)
     if len(rows) >= 2:
-        n = np.log([np.median([r["receivers"] for r in now]) for _, now, _ in rows])
-        t = np.log([np.median([r["wall"] for r in now]) for _, now, _ in rows])
+        n = np.log([_medians(now)["receivers"] for _, now, _ in rows])
+        t = np.log([_medians(now)["wall"] for _, now, _ in rows])
         print(f"total time grows as receivers^{np.polyfit(n, t, 1)[0]:.2f} over these sizes")
+    if truth and previous:
+        equal_accuracy_table(rows)
+
+
+def _medians(runs: list[dict[str, float]]) -> dict[str, float]:
+    return {k: float(np.median([r[k] for r in runs])) for k in runs[0]}
+
+
+def equal_accuracy_table(rows: list) -> None:
+    """For each size of the previous install, the fastest render of this one that is at
+    least as accurate by both errors, and the ratio of their wall times."""
+    print("\nat the previous install's accuracy (both errors no larger; medians)")
+    print(
+        "| previous --receivers | wall s | worst % | RMS % | now --receivers | wall s "
+        "| worst % | RMS % | now / previous |"
+    )
+    print("|" + "---|" * 9)
+    now = [(receivers, _medians(runs)) for receivers, runs, _ in rows]
+    for receivers, _, old in rows:
+        before = _medians(old)
+        good = [
+            (r, m) for r, m in now if m["worst"] <= before["worst"] and m["rms"] <= before["rms"]
+        ]
+        line = (
+            f"| {receivers} | {before['wall']:.1f} | {100 * before['worst']:.2f} | "
+            f"{100 * before['rms']:.2f} |"
+        )
+        if not good:
+            print(line + " none as accurate | | | | |")
+            continue
+        r, m = min(good, key=lambda item: item[1]["wall"])
+        print(
+            line + f" {r} | {m['wall']:.1f} | {100 * m['worst']:.2f} | {100 * m['rms']:.2f} | "
+            f"{m['wall'] / before['wall']:.2f} |"
+        )
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -276,11 +397,17 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--runs", type=int, default=1, help="renders per size and install")
     parser.add_argument("--no-pass", action="store_true", help="skip the pass tables")
     parser.add_argument("--no-renders", action="store_true", help="skip the render table")
+    parser.add_argument(
+        "--accuracy",
+        action="store_true",
+        help="score each render's PLY against bench_accuracy's path-traced reference",
+    )
     args = parser.parse_args(argv)
     if not args.no_pass:
         pass_table(args.receivers[0])
     if not args.no_renders:
-        render_table(args.receivers, args.previous, args.runs)
+        truth = Truth.cornell() if args.accuracy else None
+        render_table(args.receivers, args.previous, args.runs, truth)
     return 0
 
 

@@ -103,10 +103,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_accuracy import (
     CORNELL_SURFACES,
     ROOT,
-    Probes,
-    area_probes,
     bake,
-    contact_probes,
+    probe_set,
     reference,
     report,
     shut_in,
@@ -459,14 +457,6 @@ def print_race(ours: list[Row], others: dict[str, list[Row]]) -> None:
             slowest = max(row.seconds for row in rows)
             ratio = slowest / mine.seconds
             print(f"  {label} / raytrad time: > {ratio:.2f} ({label} never met both)")
-
-
-def probe_set(scene: Scene, per_quad: int, along: int) -> Probes:
-    """bench_accuracy's probes: area probes (seed 7) then contact probes, its order."""
-    area = area_probes(scene, per_quad, np.random.default_rng(7))
-    contact = contact_probes(scene, along)
-    fields = ("points", "normals", "quad", "contact")
-    return Probes(*(np.concatenate([getattr(area, f), getattr(contact, f)]) for f in fields))
 
 
 def main(argv: list[str] | None = None) -> int:
