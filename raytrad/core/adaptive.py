@@ -385,7 +385,8 @@ def final_gather(
     ``B(x) = E + rho sum_p F(x <- p) (B̄_p + [B̃_xp - B̄_p])``
     (:meth:`~raytrad.core.formfactor.FormFactorEngine.gather_at`); a point that sees
     surfaces all round (probe rays) has its factors summed to 1 as balancing does; a
-    point shut in (under a block) keeps its emission.
+    point shut in (under a block) keeps its emission, and so does a point of zero
+    reflectance, for which no factor is computed and no ray cast.
 
     Parameters
     ----------
@@ -412,20 +413,24 @@ def final_gather(
     radiosity : (N, 3) float64 [W m-2]
     hidden : (N,) bool
     """
-    rows = engine.gather_rows(points, normals)
+    # a point on a black surface shows its emission whatever reaches it: no rows, no rays
+    lit = np.flatnonzero(np.asarray(reflectance).any(axis=1))
+    rows = engine.gather_rows(points[lit], normals[lit])
     hidden = np.zeros(len(points), dtype=bool)
-    scale = np.ones(len(points))
+    scale = np.ones(len(lit))
     if occluder is not None:
         _, scene_normals = triangle_areas_normals(scene.triangle_vertices())
         closed, hidden = occluder.probe_hemispheres(
             points, normals, scene_normals, scene.double_sided
         )
         row_sum, limit = rows.row_sum, ROW_FIX_LIMIT
-        scale = np.where(closed & (np.abs(row_sum - 1.0) < limit) & (row_sum > 0), row_sum, 1.0)
+        fix = closed[lit] & (np.abs(row_sum - 1.0) < limit) & (row_sum > 0)
+        scale = np.where(fix, row_sum, 1.0)
     radiosity = np.array(radiosity, dtype=np.float64)
+    result = np.array(emitted_exitance, dtype=np.float64)
     for _ in range(1 if own is None else GATHER_PASSES):
         irradiance = gathered_irradiance(rows, radiosity, patch_radiosity) / scale[:, None]
-        result = emitted_exitance + reflectance * irradiance
+        result[lit] = emitted_exitance[lit] + reflectance[lit] * irradiance
         result[hidden] = emitted_exitance[hidden]
         if own is not None:
             radiosity[own] = result

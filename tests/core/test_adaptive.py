@@ -13,10 +13,13 @@ from raytrad.core.adaptive import (
     Refinement,
     RefineSettings,
     _to_split,
+    final_gather,
+    patch_means,
     refine_adaptively,
     subdivide,
 )
 from raytrad.core.formfactor import FormFactorEngine
+from raytrad.core.pairs import receiver_points
 from raytrad.core.pipeline import Prepared
 from raytrad.core.solver import SolveResult, SolveSettings, solve
 
@@ -97,6 +100,47 @@ def test_refined_engine_gathers_as_a_fresh_one(
         np.testing.assert_allclose(raw, fb, rtol=1e-12, atol=1e-14 * fb.max(initial=0.0))
         np.testing.assert_array_equal(ga.sources, gb.sources)
         np.testing.assert_allclose(ga.weights, gb.weights, rtol=1e-12, atol=1e-15)
+
+
+def test_black_points_show_their_emission_without_rays(
+    cornell_fine: tuple[Prepared, SolveResult],
+) -> None:
+    """A point of zero reflectance gathers nothing (B = E): no factor, no ray; the other
+    points gather exactly what they gather without it."""
+    prepared, result = cornell_fine
+    mesh, engine = prepared.mesh, prepared.engine
+    rng = np.random.default_rng(4)
+    pick = rng.choice(mesh.receiver_count, 300, replace=False)
+    points, _ = receiver_points(mesh, 1e-6 * engine.diagonal)
+    x, n = points[pick], mesh.receiver_normal[pick]
+    rho = mesh.receiver_reflectance[pick].copy()
+    emitted = mesh.receiver_emitted_exitance[pick].copy()
+    black = np.arange(len(pick)) % 3 == 0
+    rho[black] = 0.0
+    emitted[black] = rng.uniform(0.0, 5.0, (int(black.sum()), 3))
+    means = patch_means(mesh, result.radiosity)
+
+    def gathered(keep: np.ndarray) -> tuple[np.ndarray, int]:
+        before = engine.rays_cast
+        out, _ = final_gather(
+            prepared.scene,
+            engine,
+            prepared.occluder,
+            result.radiosity,
+            means,
+            x[keep],
+            n[keep],
+            rho[keep],
+            emitted[keep],
+        )
+        return out, engine.rays_cast - before
+
+    every, every_rays = gathered(np.ones(len(pick), dtype=bool))
+    lit, lit_rays = gathered(~black)
+    assert every_rays == lit_rays > 0
+    np.testing.assert_array_equal(every[black], emitted[black])
+    np.testing.assert_array_equal(every[~black], lit)
+    assert (lit[mesh.receiver_area[pick][~black] > 0] > 0).all()  # not hidden: lit
 
 
 def test_uniform_light_needs_no_refinement(prepare_furnace: Callable[..., Prepared]) -> None:
