@@ -28,6 +28,7 @@ KERNELS = (
     "clipped_contour_form_factor",
     "planar_contour_form_factor",
     "piecewise_contour_form_factor",
+    "grid_scratch",
     "_linear_shares",
     "linear_corner_shares",
     "_visible_centroid",
@@ -250,20 +251,68 @@ def piecewise_contour_form_factor(
     return out
 
 
-def _linear_shares(tri, x, n, bary, centroids, part, work, out):
-    """One triangle's corner shares into ``out`` (3,) (see :func:`linear_corner_shares`;
-    ``part`` (3, 3) and ``work`` (4, 3) are scratch)."""
+def grid_scratch(grid):
+    """Work arrays for :func:`_linear_shares` on ``grid`` or any smaller one: corner
+    positions, unit directions and heights (V, 3), (V, 3), (V,); edge terms and whether
+    each is known (E,), (E,)."""
+    vertices, edges = len(grid[0]), len(grid[4])
+    return (
+        np.empty((vertices, 3)),
+        np.empty((vertices, 3)),
+        np.empty(vertices),
+        np.empty(edges),
+        np.zeros(edges, dtype=np.bool_),
+    )
+
+
+def _linear_shares(tri, x, n, grid, scratch, part, work, out):
+    """One triangle's corner shares into ``out`` (3,) (see :func:`linear_corner_shares`).
+
+    ``grid`` is the midpoint subdivision as shared corners and edges
+    (:func:`raytrad.core.kernels.sub_grid`): each corner's direction from the receiver is
+    normalised once, and each edge's term computed once for the two parts beside it (the
+    other takes its negation, bit for bit), so a part wholly above the horizon sums the
+    same three terms, in the same order, as :func:`lambert` does; a part that straddles it
+    is clipped by :func:`clipped_factor` from the same corners. ``scratch`` is
+    :func:`grid_scratch`'s, ``part`` (3, 3) and ``work`` (4, 3) are scratch too."""
+    vertex_bary, tri_vertex, edge_of, edge_sign, edge_ends, centroids = grid
+    pos, unit, height, term, known = scratch
+    for v in range(len(vertex_bary)):
+        for d in range(3):
+            pos[v, d] = (
+                vertex_bary[v, 0] * tri[0, d]
+                + vertex_bary[v, 1] * tri[1, d]
+                + vertex_bary[v, 2] * tri[2, d]
+            )
+        ux, uy, uz = pos[v, 0] - x[0], pos[v, 1] - x[1], pos[v, 2] - x[2]
+        height[v] = ux * n[0] + uy * n[1] + uz * n[2]
+        lu = max(math.sqrt(ux * ux + uy * uy + uz * uz), 1e-300)
+        unit[v, 0], unit[v, 1], unit[v, 2] = ux / lu, uy / lu, uz / lu
+    for e in range(len(edge_ends)):
+        known[e] = False
     total = 0.0
     s0 = s1 = s2 = 0.0
-    for s in range(len(bary)):
-        for k in range(3):
-            for d in range(3):
-                part[k, d] = (
-                    bary[s, k, 0] * tri[0, d]
-                    + bary[s, k, 1] * tri[1, d]
-                    + bary[s, k, 2] * tri[2, d]
-                )
-        f = clipped_factor(part, x, n, work)
+    for s in range(len(tri_vertex)):
+        h0, h1, h2 = height[tri_vertex[s, 0]], height[tri_vertex[s, 1]], height[tri_vertex[s, 2]]
+        if h0 >= 0.0 and h1 >= 0.0 and h2 >= 0.0:
+            acc = 0.0
+            for k in range(3):
+                e = edge_of[s, k]
+                if not known[e]:
+                    a, b = edge_ends[e, 0], edge_ends[e, 1]
+                    term[e] = _unit_edge_term(
+                        unit[a, 0], unit[a, 1], unit[a, 2], unit[b, 0], unit[b, 1], unit[b, 2], n
+                    )
+                    known[e] = True
+                acc += edge_sign[s, k] * term[e]
+            f = abs(acc) / (2.0 * math.pi)
+        elif not (h0 > 0.0 or h1 > 0.0 or h2 > 0.0):
+            f = 0.0
+        else:
+            for k in range(3):
+                for d in range(3):
+                    part[k, d] = pos[tri_vertex[s, k], d]
+            f = clipped_factor(part, x, n, work)
         total += f
         s0 += f * centroids[s, 0]
         s1 += f * centroids[s, 1]
@@ -274,33 +323,41 @@ def _linear_shares(tri, x, n, bary, centroids, part, work, out):
         out[0] = out[1] = out[2] = 1.0 / 3.0
 
 
-def linear_corner_shares(triangles, points, normals, bary, centroids):
+def linear_corner_shares(triangles, points, normals, grid):
     out = np.empty((len(triangles), 3))
     part = np.empty((3, 3))
     work = np.empty((4, 3))
+    scratch = grid_scratch(grid)
     for i in range(len(triangles)):
-        _linear_shares(triangles[i], points[i], normals[i], bary, centroids, part, work, out[i])
+        _linear_shares(triangles[i], points[i], normals[i], grid, scratch, part, work, out[i])
     return out
 
 
 def _visible_centroid(tri, x, n, horizon, out):
     """The mean corner of the part of a triangle above the receiver's horizon into ``out``
     (3,) (:func:`raytrad.core.kernels.visible_centroid` for one pair)."""
-    h = np.empty(3)
     reach = 0.0
-    above = True
+    h0 = h1 = h2 = 0.0
     for k in range(3):
         dx, dy, dz = tri[k, 0] - x[0], tri[k, 1] - x[1], tri[k, 2] - x[2]
-        h[k] = dx * n[0] + dy * n[1] + dz * n[2]
+        height = dx * n[0] + dy * n[1] + dz * n[2]
+        if k == 0:
+            h0 = height
+        elif k == 1:
+            h1 = height
+        else:
+            h2 = height
         reach = max(reach, dx * dx + dy * dy + dz * dz)
     snap = horizon * math.sqrt(reach)
-    for k in range(3):
-        if not (abs(h[k]) <= snap or h[k] >= 0.0):
-            above = False
-    if above:
+    if (
+        (abs(h0) <= snap or h0 >= 0.0)
+        and (abs(h1) <= snap or h1 >= 0.0)
+        and (abs(h2) <= snap or h2 >= 0.0)
+    ):
         for d in range(3):
             out[d] = (tri[0, d] + tri[1, d] + tri[2, d]) / 3.0
         return
+    h = (h0, h1, h2)
     count = 0
     out[0] = out[1] = out[2] = 0.0
     for k in range(3):

@@ -213,11 +213,12 @@ def subarea_spread(
 def _triangle(tri, m, x, n, limits, rules, scratch, target, shares, factor, k):
     """One near triangle of :func:`near_triangles` into ``target``, ``shares`` and
     ``factor[k]``; False where it does not face the receiver or gives no factor.
-    ``limits`` is (band, horizon, lift, share_sizes), ``rules`` the subdivisions' and the
-    corner rule's points and weights, ``scratch`` two work arrays."""
+    ``limits`` is (band, horizon, lift, share_sizes), ``rules`` the subdivisions' grids
+    (:func:`raytrad.core.kernels.sub_grid`, 3 and 2 levels) and the corner rule's points
+    and weights, ``scratch`` two work arrays and the grids' (:func:`grid_scratch`)."""
     band, horizon, lift, share_sizes = limits
-    bary3, centroids3, bary2, centroids2, rule, rule_weight = rules
-    part, work = scratch
+    grid3, grid2, rule, rule_weight = rules
+    part, work, shared = scratch
     front = (x[0] - tri[0, 0]) * m[0] + (x[1] - tri[0, 1]) * m[1] + (x[2] - tri[0, 2]) * m[2]
     if not front > band:
         return False
@@ -243,9 +244,9 @@ def _triangle(tri, m, x, n, limits, rules, scratch, target, shares, factor, k):
         for v in range(3):
             shares[v] = shares[v] / total if total > 0.0 else 1.0 / 3.0
     elif distance < 1.0:
-        _k._linear_shares(tri, x, n, bary3, centroids3, part, work, shares)
+        _k._linear_shares(tri, x, n, grid3, shared, part, work, shares)
     else:
-        _k._linear_shares(tri, x, n, bary2, centroids2, part, work, shares)
+        _k._linear_shares(tri, x, n, grid2, shared, part, work, shares)
     return True
 
 
@@ -263,10 +264,8 @@ def near_triangles(
     horizon,
     lift,
     share_sizes,
-    bary3,
-    centroids3,
-    bary2,
-    centroids2,
+    grid3,
+    grid2,
     rule,
     rule_weight,
 ):
@@ -305,8 +304,8 @@ def near_triangles(
     node_target = np.empty((whole, 3))
     node_w = np.empty(whole)
     limits = (band, horizon, lift, share_sizes)
-    rules = (bary3, centroids3, bary2, centroids2, rule, rule_weight)
-    scratch = (np.empty((3, 3)), np.empty((4, 3)))
+    rules = (grid3, grid2, rule, rule_weight)
+    scratch = (np.empty((3, 3)), np.empty((4, 3)), _k.grid_scratch(grid3))
     k = 0
     h = 0
     for c in range(near.shape[0]):

@@ -128,14 +128,20 @@ def shoot(
         excess = np.zeros(3)
         for g in range(near_count):
             r = near[g]
-            seen = np.zeros(3)
+            seen0 = seen1 = seen2 = 0.0
             for s in range(near_pointer[g], near_pointer[g + 1]):
-                for c in range(3):
-                    seen[c] += near_weights[s] * scratch[near_sources[s], c]
+                w = near_weights[s]
+                source = near_sources[s]
+                seen0 += w * scratch[source, 0]
+                seen1 += w * scratch[source, 1]
+                seen2 += w * scratch[source, 2]
             a = area[receivers[r]]
+            f = factors[r]
+            received[r, 0] = f * seen0
+            received[r, 1] = f * seen1
+            received[r, 2] = f * seen2
             for c in range(3):
-                received[r, c] = factors[r] * seen[c]
-                excess[c] += a * (received[r, c] - factors[r] * amount[c])
+                excess[c] += a * (received[r, c] - f * amount[c])
         is_near = np.zeros(count, dtype=np.bool_)
         for g in range(near_count):
             is_near[near[g]] = True
@@ -168,6 +174,7 @@ def shoot(
     power = np.zeros(3)
     reflected = np.zeros(3)
     capture = 0.0
+    bounce = np.empty(3)
     for r in range(count):
         k = receivers[r]
         a = area[k]
@@ -175,11 +182,15 @@ def shoot(
         for c in range(3):
             value = received[r, c]
             irradiance[k, c] += value
-            bounce = reflectance[k, c] * value
+            bounce[c] = reflectance[k, c] * value
             power[c] += a * value
-            reflected[c] += a * bounce
-            for e in range(receiver_ptr[k], receiver_ptr[k + 1]):
-                patch_radiosity[entry_patch[e], c] += entry_weight[e] * bounce
+            reflected[c] += a * bounce[c]
+        for e in range(receiver_ptr[k], receiver_ptr[k + 1]):  # each (patch, c) in order
+            w = entry_weight[e]
+            p = entry_patch[e]
+            patch_radiosity[p, 0] += w * bounce[0]
+            patch_radiosity[p, 1] += w * bounce[1]
+            patch_radiosity[p, 2] += w * bounce[2]
     return power, reflected, capture
 
 

@@ -241,7 +241,11 @@ class ConvergenceMonitor:
         self.log = ErrorLog()
         self._next = 0
         self._max_reflectance = mesh.receiver_reflectance.max(axis=0)
-        self._counted = counted_receivers(mesh)
+        #: the receivers the error is taken over, and their area, reflectance and emission
+        self._counted = np.flatnonzero(counted_receivers(mesh))
+        self._area = mesh.receiver_area[self._counted]
+        self._reflectance = mesh.receiver_reflectance[self._counted]
+        self._emission = mesh.receiver_emitted_exitance[self._counted]
         self._emitted = float((mesh.receiver_area @ mesh.receiver_emitted_exitance).sum())
         self.latest_estimate = math.inf
         self.latest_bound = math.inf
@@ -256,16 +260,16 @@ class ConvergenceMonitor:
         m = self.mesh
         unshot_power = float((m.patch_area @ state.unshot_magnitude).sum())
         residual = unshot_power / self._emitted if self._emitted > 0 else 0.0
-        radiosity = m.receiver_emitted_exitance + m.receiver_reflectance * state.irradiance
-        counted = self._counted
-        area = m.receiver_area[counted]
+        # the counted receivers' radiosity (the others' is never read)
+        radiosity = self._emission + self._reflectance * state.irradiance[self._counted]
+        area = self._area
         captured = state.captured[np.isfinite(state.captured)]
         max_capture = max(1.0, float(captured.max()) if len(captured) else 1.0)
         bound_rms, bound_max = error_bound(
             state.unshot_magnitude,
             m.patch_area,
             area,
-            radiosity[counted],
+            radiosity,
             self._max_reflectance,
             max(1.0, self.engine.max_row_sum),
             max_capture,
@@ -277,8 +281,8 @@ class ConvergenceMonitor:
             m.patch_reflectance,
             state.captured,
             area,
-            m.receiver_reflectance[counted],
-            radiosity[counted],
+            self._reflectance,
+            radiosity,
             state.spread if state.spread.shape == state.shot.shape else 0.0,
         )
         log = self.log
@@ -290,7 +294,8 @@ class ConvergenceMonitor:
         log.bound_rms.append(bound_rms.tolist())
         log.bound_max.append(bound_max.tolist())
         if self.reference is not None:
-            rms, maximum = true_error(radiosity[counted], self.reference.radiosity[counted], area)
+            truth = self.reference.radiosity[self._counted]
+            rms, maximum = true_error(radiosity, truth, area)
             log.true_rms.append(rms.tolist())
             log.true_max.append(maximum.tolist())
         self.latest_estimate = float(estimate.max())

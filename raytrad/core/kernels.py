@@ -183,6 +183,36 @@ def _sub_triangles(levels: int) -> tuple[np.ndarray, np.ndarray]:
     return tris, centroids
 
 
+@functools.lru_cache(maxsize=8)
+def sub_grid(levels: int) -> tuple[np.ndarray, ...]:
+    """:func:`_sub_triangles` as shared corners and edges, for the compiled corner shares
+    (cached, read-only).
+
+    Returns
+    -------
+    vertex_bary : (V, 3) float64, each distinct corner's barycentric coordinates (bitwise
+        the rows of :func:`_sub_triangles`' corners: ``vertex_bary[tri_vertex]`` equals them)
+    tri_vertex : (S, 3) int64, each part's corners
+    edge_of : (S, 3) int64, the edge from each part's corner k to corner k + 1
+    edge_sign : (S, 3) float64, +1 where that edge runs as ``edge_ends`` has it, else -1
+    edge_ends : (E, 2) int64, each distinct edge's corners
+    centroids : (S, 3) float64, as :func:`_sub_triangles`'
+    """
+    corners, centroids = _sub_triangles(levels)
+    vertex_bary, inverse = np.unique(corners.reshape(-1, 3), axis=0, return_inverse=True)
+    tri_vertex = inverse.reshape(-1, 3).astype(np.int64)
+    start, end = tri_vertex.reshape(-1), np.roll(tri_vertex, -1, axis=1).reshape(-1)
+    low, high = np.minimum(start, end), np.maximum(start, end)
+    keys, edge_of = np.unique(low * len(vertex_bary) + high, return_inverse=True)
+    edge_ends = np.stack(np.divmod(keys, len(vertex_bary)), axis=1).astype(np.int64)
+    edge_sign = np.where(start == low, 1.0, -1.0).reshape(-1, 3)
+    out = (vertex_bary, tri_vertex, edge_of.reshape(-1, 3).astype(np.int64), edge_sign)
+    tables = (*out, edge_ends, np.ascontiguousarray(centroids))
+    for table in tables:
+        table.flags.writeable = False
+    return tables
+
+
 def linear_corner_shares(
     triangles: np.ndarray, points: np.ndarray, normals: np.ndarray, levels: int = 2
 ) -> np.ndarray:
@@ -191,10 +221,7 @@ def linear_corner_shares(
     fast = compiled.get()
     if fast is None:
         return numpy_linear_corner_shares(triangles, points, normals, levels)
-    corners, centroids = _sub_triangles(levels)
-    return fast.linear_corner_shares(
-        _f64(triangles), _f64(points), _f64(normals), corners, centroids
-    )
+    return fast.linear_corner_shares(_f64(triangles), _f64(points), _f64(normals), sub_grid(levels))
 
 
 def numpy_linear_corner_shares(

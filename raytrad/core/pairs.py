@@ -34,10 +34,10 @@ from raytrad.core.gather import (
     subarea_triangles,
 )
 from raytrad.core.kernels import (
-    _sub_triangles,
     linear_corner_shares,
     polygon_form_factor,
     sample_weights,
+    sub_grid,
     visibility_rays,
     visible_centroid,
 )
@@ -420,8 +420,6 @@ class PairFactors:
         fast = compiled.get()
         if fast is None:
             return self._numpy_near_field(x, nx, near, sub)
-        bary3, centroids3 = _sub_triangles(3)
-        bary2, centroids2 = _sub_triangles(2)
         tree = self._tree
         return tuple(
             fast.near_triangles(
@@ -438,10 +436,8 @@ class PairFactors:
                 tol.horizon,
                 tol.ray_offset * self.diagonal,
                 SHARE_SIZES,
-                bary3,
-                centroids3,
-                bary2,
-                centroids2,
+                sub_grid(3),
+                sub_grid(2),
                 RULE_POINTS,
                 RULE_WEIGHTS,
             )

@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from raytrad.core.kernels import disk_form_factor
+from raytrad.core.kernels import _sub_triangles, disk_form_factor, sub_grid
 from tests.core.analytic import (
     UP,
     corner_factor,
@@ -102,3 +102,26 @@ def test_polygon_factor_is_zero_for_a_polygon_behind_the_receiver() -> None:
     assert polygon_factor(below, np.zeros(3), -UP) == pytest.approx(
         4.0 * corner_factor(0.5, 0.5, 0.3), rel=1e-12
     )
+
+
+@pytest.mark.parametrize("levels", [1, 2, 3])
+def test_the_sub_grid_shares_corners_and_edges_of_the_midpoint_split(levels: int) -> None:
+    corners, centroids = _sub_triangles(levels)
+    vertex_bary, tri_vertex, edge_of, edge_sign, edge_ends, grid_centroids = sub_grid(levels)
+    side = 2**levels
+    # a triangular grid of side s = 2^L: (s+1)(s+2)/2 corners, 3 s(s+1)/2 edges, bitwise the
+    # corners each part names
+    assert len(vertex_bary) == (side + 1) * (side + 2) // 2
+    assert len(edge_ends) == 3 * side * (side + 1) // 2
+    np.testing.assert_array_equal(vertex_bary[tri_vertex], corners)
+    np.testing.assert_array_equal(grid_centroids, centroids)
+    # each part's edge k runs from its corner k to corner k + 1, as its sign says
+    start, end = tri_vertex, np.roll(tri_vertex, -1, axis=1)
+    forward = edge_sign > 0
+    np.testing.assert_array_equal(np.where(forward, start, end), edge_ends[edge_of, 0])
+    np.testing.assert_array_equal(np.where(forward, end, start), edge_ends[edge_of, 1])
+    # an inner edge is shared by two parts running it both ways; an outer one by one part
+    uses = np.bincount(edge_of.reshape(-1), minlength=len(edge_ends))
+    assert set(uses) <= {1, 2} and (uses == 1).sum() == 3 * side
+    net = np.bincount(edge_of.reshape(-1), weights=edge_sign.reshape(-1))
+    np.testing.assert_array_equal(np.abs(net[uses == 2]), 0.0)
