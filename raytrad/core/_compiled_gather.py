@@ -16,6 +16,7 @@ KERNELS = (
     "_sort_ascending",
     "sum_shares",
     "gather_sums",
+    "block_irradiance",
 )
 
 
@@ -104,3 +105,30 @@ def gather_sums(pointer, sources, weights, radiosity):
             s2 += w * b[2]
         out[g, 0], out[g, 1], out[g, 2] = s0, s1, s2
     return out
+
+
+def block_irradiance(out, mean, near, factors, local, pointer, sources, weights, radiosity):
+    """One patch's part of a final gather, added to ``out`` (N, 3) (see
+    :func:`raytrad.core.gather.numpy_gathered_irradiance`, the same sums in the same
+    order): ``F B̄_p`` (``mean`` (3,)) at each point ``near``, then ``F (B̃ - B̄_p)`` at
+    its near-field points (``local``, indices into ``near``), ``B̃`` summed as
+    :func:`gather_sums` sums it."""
+    b0, b1, b2 = mean[0], mean[1], mean[2]
+    for i in range(len(near)):
+        j, f = near[i], factors[i]
+        out[j, 0] += f * b0
+        out[j, 1] += f * b1
+        out[j, 2] += f * b2
+    for g in range(len(local)):
+        s0 = s1 = s2 = 0.0
+        for k in range(pointer[g], pointer[g + 1]):
+            w = float(weights[k])
+            source = sources[k]
+            s0 += w * radiosity[source, 0]
+            s1 += w * radiosity[source, 1]
+            s2 += w * radiosity[source, 2]
+        i = local[g]
+        j, f = near[i], factors[i]
+        out[j, 0] += f * (s0 - b0)
+        out[j, 1] += f * (s1 - b1)
+        out[j, 2] += f * (s2 - b2)

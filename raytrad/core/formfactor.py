@@ -468,14 +468,19 @@ class FormFactorEngine:
         return np.array(self._row_sum if self._final_rows is None else self._final_rows)
 
     def _candidates(
-        self, patch: int, x: np.ndarray | None = None, nx: np.ndarray | None = None
+        self,
+        patch: int,
+        x: np.ndarray | None = None,
+        nx: np.ndarray | None = None,
+        levels: np.ndarray | None = None,
     ) -> np.ndarray:
-        """Receivers (or points ``x`` with normals ``nx``) that may exchange light with
-        ``patch`` (cheap conservative culling)."""
+        """Receivers (or points ``x`` with normals ``nx``, and ``levels`` their heights
+        along them if known) that may exchange light with ``patch`` (cheap conservative
+        culling)."""
         m = self.mesh
         if x is None or nx is None:
             x, nx, levels = self._points, m.receiver_normal, self._levels
-        else:
+        elif levels is None:
             levels = np.einsum("ij,ij->i", nx, x)
         center, radius = m.patch_center[patch], m.patch_radius[patch]
         band = tol.horizon * self.diagonal
@@ -560,21 +565,25 @@ class FormFactorEngine:
         normals = np.asarray(normals, dtype=np.float64).reshape(-1, 3)
         origins = points + tol.ray_offset * self.diagonal * normals
         sides = self._pairs.sides(origins)
+        levels = np.einsum("ij,ij->i", normals, points)
         rows = GatherRows(len(points), np.zeros(len(points)), [], self.subarea_means)
 
-        def work(patch: int) -> tuple[np.ndarray, tuple[np.ndarray, int, GatherWeights]]:
-            near = self._candidates(patch, points, normals)
+        def work(patch: int) -> tuple[np.ndarray, np.ndarray, int, GatherWeights]:
+            near = self._candidates(patch, points, normals, levels)
             part = None if sides is None else sides[near]
-            return near, self._factors(points[near], normals[near], origins[near], patch, part)
+            factors, rays, gather = self._factors(
+                points[near], normals[near], origins[near], patch, part
+            )
+            return near, factors, rays, compact_gather(gather, self._index)
 
         patches = list(range(self.mesh.patch_count))
-        for patch, (near, (factors, rays, gather)) in zip(
+        for patch, (near, factors, rays, gather) in zip(
             patches, self._per_patch(work, patches), strict=True
         ):
             self.rays_cast += rays
             factors = factors * self._col_scale[patch]
             rows.row_sum[near] += factors
-            rows.patches.append((patch, near, factors, compact_gather(gather, self._index)))
+            rows.patches.append((patch, near, factors, gather))
         return rows
 
     def factors_at(self, points: np.ndarray, normals: np.ndarray, patch: int) -> np.ndarray:

@@ -22,6 +22,7 @@ solution as a correction that is itself shot on (:func:`raytrad.core.solver.solv
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -138,19 +139,56 @@ class GatherRows:
     patches: list[tuple[int, np.ndarray, np.ndarray, GatherWeights]]
     means: SubareaMeans | None = None  # the sources beyond the receivers
 
+    @functools.cached_property
+    def read_nodes(self) -> np.ndarray:
+        """(K,) int64: the nodes whose means the rows' gather weights read, ascending
+        (none without ``means``); read once the rows are complete."""
+        if self.means is None:
+            return np.zeros(0, dtype=np.int64)
+        base = self.means.base
+        read = np.zeros(len(self.means.pointer) - 1, dtype=bool)
+        for _, _, _, g in self.patches:
+            read[g.sources[g.sources >= base] - base] = True
+        return np.flatnonzero(read)
+
 
 def gathered_irradiance(
     rows: GatherRows, radiosity: np.ndarray, patch_radiosity: np.ndarray
 ) -> np.ndarray:
     """(N, 3) irradiance [W m-2] the points of ``rows`` gather from a solution: receiver
-    ``radiosity`` (R, 3) and its patch means ``patch_radiosity`` (P, 3) [W m-2]."""
-    irradiance = np.zeros((rows.count, 3))
+    ``radiosity`` (R, 3) and its patch means ``patch_radiosity`` (P, 3) [W m-2]; compiled
+    when available (see :func:`numpy_gathered_irradiance`, the reference: the same sums in
+    the same order)."""
     if rows.means is not None:  # only the means the rows read (a few new points' worth)
-        base = rows.means.base
-        read = np.zeros(len(rows.means.pointer) - 1, dtype=bool)
-        for _, _, _, g in rows.patches:
-            read[g.sources[g.sources >= base] - base] = True
-        radiosity = rows.means.extend(radiosity, np.flatnonzero(read))
+        radiosity = rows.means.extend(radiosity, rows.read_nodes)
+    fast = compiled.get()
+    if fast is None:
+        return numpy_gathered_irradiance(rows, radiosity, patch_radiosity)
+    irradiance = np.zeros((rows.count, 3))
+    radiosity = np.ascontiguousarray(radiosity, dtype=np.float64)
+    patch_radiosity = np.ascontiguousarray(patch_radiosity, dtype=np.float64)
+    for patch, near, factors, gather in rows.patches:
+        fast.block_irradiance(
+            irradiance,
+            patch_radiosity[patch],
+            np.ascontiguousarray(near, dtype=np.int64),
+            np.ascontiguousarray(factors, dtype=np.float64),
+            gather.receivers,
+            gather.pointer,
+            gather.sources,
+            gather.weights,
+            radiosity,
+        )
+    return irradiance
+
+
+def numpy_gathered_irradiance(
+    rows: GatherRows, radiosity: np.ndarray, patch_radiosity: np.ndarray
+) -> np.ndarray:
+    """:func:`gathered_irradiance` in numpy, ``radiosity`` extended by the means the rows
+    read: per patch, ``F B̄_p`` at every point that sees it, then ``F (B̃ - B̄_p)`` at its
+    near-field points."""
+    irradiance = np.zeros((rows.count, 3))
     for patch, near, factors, gather in rows.patches:
         irradiance[near] += factors[:, None] * patch_radiosity[patch]
         if len(gather.receivers):

@@ -17,7 +17,10 @@ import pytest
 
 from raytrad.core import compiled
 from raytrad.core.gather import (
+    GatherRows,
     GatherWeights,
+    gathered_irradiance,
+    numpy_gathered_irradiance,
     numpy_sum_shares,
     sum_shares,
 )
@@ -187,6 +190,41 @@ def test_gathered_sums_each_near_receivers_shares(compact: bool) -> None:
     )
     np.testing.assert_allclose(gather.numpy_gathered(radiosity), want, rtol=1e-14, atol=0)
     np.testing.assert_array_equal(gather.gathered(radiosity), gather.numpy_gathered(radiosity))
+
+
+def test_final_gather_irradiance_sums_every_patchs_rows() -> None:
+    """The compiled final gather against its numpy reference (bit for bit) and a plain
+    loop: blocks with and without near-field points, points in several blocks, compact
+    (int32, float32) weights as the rows keep them."""
+    rng = np.random.default_rng(13)
+    count, receivers, patches = 60, 400, 7
+    radiosity = rng.random((receivers, 3)) * 10.0
+    patch_radiosity = rng.random((patches, 3)) * 10.0
+    blocks = []
+    for patch in range(patches):
+        near = np.sort(rng.choice(count, rng.integers(1, count), replace=False))
+        factors = rng.random(len(near)) * 0.1
+        local = np.sort(rng.choice(len(near), rng.integers(0, len(near) + 1), replace=False))
+        if patch == 2:
+            local = local[:0]  # no near field for this patch
+        lengths = rng.integers(1, 6, len(local))
+        pointer = np.concatenate([[0], np.cumsum(lengths)]).astype(np.int64)
+        sources = rng.integers(0, receivers, pointer[-1]).astype(np.int32)
+        weights = rng.random(pointer[-1]).astype(np.float32)
+        gather = GatherWeights(local.astype(np.int32), factors[local], pointer, sources, weights)
+        blocks.append((patch, near, factors, gather))
+    rows = GatherRows(count, np.zeros(count), blocks)
+    got = gathered_irradiance(rows, radiosity, patch_radiosity)
+    np.testing.assert_array_equal(got, numpy_gathered_irradiance(rows, radiosity, patch_radiosity))
+    want = np.zeros((count, 3))
+    for patch, near, factors, gather in blocks:
+        for i, j in enumerate(near):
+            want[j] += factors[i] * patch_radiosity[patch]
+        for g, i in enumerate(gather.receivers):
+            a, b = gather.pointer[g], gather.pointer[g + 1]
+            seen = gather.weights[a:b].astype(np.float64) @ radiosity[gather.sources[a:b]]
+            want[near[i]] += factors[i] * (seen - patch_radiosity[patch])
+    np.testing.assert_allclose(got, want, rtol=1e-12, atol=1e-12)
 
 
 def test_means_of_the_nodes_a_gather_reads(cornell: Prepared) -> None:
