@@ -41,9 +41,13 @@ def fill_hidden(mesh: RadiosityMesh, radiosity: np.ndarray, rings: int = 64) -> 
     if mesh.receiver_visible is None:
         return out
     known = np.asarray(mesh.receiver_visible, dtype=bool).copy()
+    if known.all():
+        return out
     tri = mesh.triangle_receivers
     a = np.concatenate([tri[:, 0], tri[:, 1], tri[:, 2], tri[:, 1], tri[:, 2], tri[:, 0]])
     b = np.concatenate([tri[:, 1], tri[:, 2], tri[:, 0], tri[:, 0], tri[:, 1], tri[:, 2]])
+    filled = ~known[a]  # only hidden receivers are filled: the edges from them
+    a, b = a[filled], b[filled]
     count = len(out)
     key = np.unique(a.astype(np.int64) * count + b)  # each neighbour once, sorted by a, b
     a, b = key // count, key % count

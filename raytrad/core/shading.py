@@ -56,10 +56,12 @@ def shade(
     facing = np.einsum("ij,ij->i", normal[tri], direction[ok]) < 0
     back = ~facing & (twin[tri] >= 0)
     tri = np.where(back, twin[tri], tri)
-    w = np.where(back[:, None], _reversed_weights(mesh.triangles, hit[ok], tri, w), w)
+    if back.any():  # only the rays that see a two-sided surface's back (w is a copy)
+        w[back] = _reversed_weights(mesh.triangles, hit[ok][back], tri[back], w[back])
     visible = facing | back
-    values = np.einsum("nk,nkc->nc", w, radiosity[mesh.triangle_receivers[tri]])
-    out[np.nonzero(ok)[0][visible]] = values[visible]
+    tri = tri[visible]
+    values = np.einsum("nk,nkc->nc", w[visible], radiosity[mesh.triangle_receivers[tri]])
+    out[np.nonzero(ok)[0][visible]] = values
     return out
 
 
