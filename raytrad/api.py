@@ -156,7 +156,7 @@ def refine(
 ) -> tuple[Prepared, SolveResult, Refinement]:
     """Adaptive refinement of a solve: the refined mesh (in a copy of ``prepared``), its
     radiosity (in a copy of ``result``) and what was done
-    (:func:`raytrad.core.pipeline.refine_solution`; ``stop`` ends it between rounds)."""
+    (:func:`raytrad.core.pipeline.refine_solution`; ``stop`` ends it, within a round too)."""
     return pipeline.refine_solution(prepared, result, settings.refine, stop)
 
 
@@ -252,8 +252,9 @@ def render(
         state, columns = resume_point(checkpoint, key, strict) if resume else (None, None)
         taken = resuming.resume_facts(state, columns)  # before the solve moves ``state`` on
 
-        def save(state: SolverState, engine: Any = None) -> None:  # with a pass's columns
-            save_state(checkpoint, state, key, (engine or prepared.engine).pass_column_parts())
+        def save(state: SolverState, engine: Any = None, whole: bool = False) -> None:
+            parts = (engine or prepared.engine).pass_column_parts(whole)  # a pass's columns
+            save_state(checkpoint, state, key, parts, whole)
 
         on_column = pass_hook(save, settings.checkpoint_seconds)  # a long pass is saved too
         prepared = prepare(loaded.scene, settings, budget, columns, on_column)
@@ -273,6 +274,8 @@ def render(
                     prepared.mesh, prepared.engine, solve_settings, state, on_shot, stop
                 )
             error_log = monitor.finish(result.state)
+            if result.stop_reason in RESUMABLE:  # with every column: no pass on --resume
+                save(result.state, whole=prepared.engine.complete)
             prepared.engine.release_columns()  # refinement and the outputs need none
             check_output_range(result.radiosity, scene_path)
             solved = prepared
@@ -281,14 +284,12 @@ def render(
             with timed(timings, "error"):
                 error = estimate_error(solved, baked, result, error_log)
             with timed(timings, "write"):
-                outputs, facts = write_outputs(
-                    baked, result, output_dir, scene_path.stem, settings, camera
-                )
+                stem = scene_path.stem
+                outputs, facts = write_outputs(baked, result, output_dir, stem, settings, camera)
                 if plot:
                     outputs["plot"] = output_dir / "convergence.png"
                     plot_convergence(outputs["plot"], {result.method: error_log}, str(scene_path))
-            if result.stop_reason in RESUMABLE:
-                save(result.state)  # --resume continues from here
+            if result.stop_reason in RESUMABLE:  # saved after the solve: resume from there
                 outputs["checkpoint"] = checkpoint
             elif checkpoint.exists():
                 checkpoint.unlink()

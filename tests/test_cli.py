@@ -82,6 +82,28 @@ def test_max_shots_stops_early_and_says_so(
     assert radiosity.mean() < 0.99 * 2.0  # three shots are not the converged 2.0
 
 
+def test_a_resume_says_what_it_took(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], caplog: pytest.LogCaptureFixture
+) -> None:
+    """``--resume`` without a checkpoint says it starts afresh; a solve cut after the pass
+    keeps every column, and the resumed run's summary says its pass traced nothing."""
+    scene, out = SCENES / "cornell-box.obj", tmp_path / "out"
+    small = ["--receivers", "800", "--patches", "60"]
+    status, _, err = run_cli(["render", str(scene), "-o", str(out), "--resume", *small], capsys)
+    assert status == 0, err
+    assert "no checkpoint to resume from; starting afresh" in caplog.text
+    argv = ["render", str(scene), "-o", str(out), "--max-shots", "5", *small]
+    assert run_cli(argv, capsys)[0] == 0
+    status, stdout, err = run_cli(
+        ["render", str(scene), "-o", str(out), "--resume", *small], capsys
+    )
+    assert status == 0, err
+    assert "0 in the form-factor pass of this run" in stdout
+    assert "every column came from the checkpoint" in stdout
+    report = json.loads((out / "report.json").read_text())
+    assert report["resumed"]["shots"] == 5 and report["solve"]["stop_reason"] == "converged"
+
+
 def test_python_dash_m_exit_status(tmp_path: Path) -> None:
     def raytrad(*args: str) -> subprocess.CompletedProcess[str]:
         return subprocess.run(
@@ -270,7 +292,10 @@ def test_interrupted_render_resumes_to_the_same_answer(tmp_path: Path) -> None:
     assert second.result.stop_reason == "converged"
     assert second.result.state.shots == straight.result.state.shots
     resumed = second.report["resumed"]
-    assert resumed["shots"] == 20 and resumed["form_factor_columns"] == 0  # the pass was done
+    # the checkpoint holds the finished pass: the resume casts no form-factor ray
+    assert resumed["shots"] == 20
+    assert resumed["form_factor_columns"] == first.prepared.mesh.patch_count
+    assert second.report["solve"]["rays"] == 0
     assert 0 < resumed["solve_seconds"] <= first.result.state.seconds
     np.testing.assert_allclose(second.result.radiosity, straight.result.radiosity, rtol=1e-9)
     assert not checkpoint.exists()

@@ -21,7 +21,11 @@ Three tables:
    rays and peak memory; with ``--previous RAYTRAD`` (the ``raytrad`` executable of
    another install, e.g. the previous release in its own venv) the same renders by it,
    alternating, and the time ratio. The growth exponent of the total time is fitted over
-   the sizes.
+   the sizes. With ``--accuracy``, each render's PLY is also scored against
+   ``tools/bench_accuracy.py``'s path-traced reference (worst surface, point RMS); with
+   ``--previous`` too, a last table gives, for each size of the other install, the
+   fastest render of this one at least as accurate by both errors: the speed-up at
+   equal accuracy.
 
     python tools/bench_performance.py                                # 5000 receivers
     python tools/bench_performance.py --receivers 5000 20000 --previous ../venv-prev/bin/raytrad
@@ -400,9 +404,15 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument(
         "--accuracy",
         action="store_true",
-        help="score each render's PLY against bench_accuracy's path-traced reference",
+        help=(
+            "score each render's PLY against bench_accuracy's path-traced reference "
+            "(path-traced into .cache/accuracy on first use, about 4 minutes); with "
+            "--previous, also the speed-up at equal accuracy"
+        ),
     )
     args = parser.parse_args(argv)
+    if args.accuracy and args.no_renders:
+        parser.error("--accuracy scores the renders: it cannot go with --no-renders")
     if not args.no_pass:
         pass_table(args.receivers[0])
     if not args.no_renders:

@@ -119,11 +119,15 @@ def _print_summary(report: dict[str, Any], outputs: dict[str, Path]) -> None:
         f"{stats['patches']} patches, {stats['subareas']} sample points",
         f"solve      {s['method']}: {s['stop_reason']} after {s['shots']} shots, "
         f"residual {s['residual']:.2e}",
-        f"rays       {s['rays']} in the form-factor pass ({s['rays_per_second']:.3g} rays/s"
+        f"rays       {s['rays']} in the form-factor pass"
+        + (" of this run" if report.get("resumed") else "")
+        + f" ({s['rays_per_second']:.3g} rays/s"
         + (
-            f"; {_share(s['rays'], s['rays_naive'])} of {s['rays_naive']} without culling"
-            if stats["occlusion_tested"]
-            else "; nothing can occlude, no rays needed"
+            "; nothing can occlude, no rays needed"
+            if not stats["occlusion_tested"]
+            else "; every column came from the checkpoint"
+            if report.get("resumed") and not s["rays_naive"]
+            else f"; {_share(s['rays'], s['rays_naive'])} of {s['rays_naive']} without culling"
         )
         + ")",
         "time       " + ", ".join(f"{k} {v:.2f}s" for k, v in t.items()) + f"; total {total:.2f}s",

@@ -159,7 +159,9 @@ def refine_adaptively(
         The solution at ``mesh``'s receivers [W m-2].
     settings : RefineSettings
     stop : callable or None
-        Polled before each round (a time budget spent): True ends refinement there.
+        Polled before each round and after each patch of a round's gather (a time budget
+        spent, Ctrl-C): True ends refinement there (a round cut short keeps its receivers
+        at the interpolation of the mesh before it).
     """
     budget = settings.max_receivers or 2 * mesh.receiver_count
     out = Refinement(mesh, np.asarray(radiosity, dtype=np.float64))
@@ -213,7 +215,7 @@ def refine_adaptively(
         near = engine.refined(refined)
         try:
             refined, gathered = _gather(
-                scene, refined, near, occluder, current, patch_radiosity, new
+                scene, refined, near, occluder, current, patch_radiosity, new, stop
             )
         finally:
             near.close()
@@ -221,6 +223,9 @@ def refine_adaptively(
         out.rays_naive += near.rays_naive
         del near  # its tables, the size of the mesh's, go before the next round's are built
         return_freed_memory()
+        if gathered is None:  # stopped within the round: the last mesh's look, kept
+            _keep_interpolated(out, refined, before, new)
+            break
         changes.append((before - gathered, refined.receiver_area[new]))
         found = np.concatenate([found, _found(level, before, gathered, settings)])
         found[new[refined.receiver_area[new] == 0]] = 0.0  # hidden: nothing to interpolate
@@ -243,6 +248,27 @@ def refine_adaptively(
             ", ".join(f"{n} {c}" for n, c in out.by_object.items()),
         )
     return out
+
+
+def _keep_interpolated(
+    out: Refinement, refined: RadiosityMesh, before: np.ndarray, new: np.ndarray
+) -> None:
+    """A round stopped before its gather finished: its new receivers keep the
+    interpolation of the mesh before it (``before``, their emission where hidden), which
+    shows exactly what that mesh shows, and refinement ends there (``out.stopped``)."""
+    hidden = ~np.asarray(refined.receiver_visible, dtype=bool)[new]
+    before = before.copy()
+    before[hidden] = refined.receiver_emitted_exitance[new[hidden]]
+    out.radiosity = np.concatenate([out.radiosity, before])
+    out.mesh = refined
+    out.added += len(new)
+    out.stopped = True
+    log.warning(
+        "refinement stopped in round %d (time limit spent or interrupted): its %d new "
+        "receivers show the interpolation of the round before",
+        out.rounds + 1,
+        len(new),
+    )
 
 
 def _to_split(
@@ -379,7 +405,8 @@ def final_gather(
     reflectance: np.ndarray,
     emitted_exitance: np.ndarray,
     own: np.ndarray | None = None,
-) -> tuple[np.ndarray, np.ndarray]:
+    stop: Callable[[], bool] | None = None,
+) -> tuple[np.ndarray | None, np.ndarray]:
     """Radiosity at surface points gathered from a solution, and which points are hidden.
 
     ``B(x) = E + rho sum_p F(x <- p) (B̄_p + [B̃_xp - B̄_p])``
@@ -407,22 +434,29 @@ def final_gather(
         first guess): their indices. They see each other, so the gather is repeated
         :data:`GATHER_PASSES` times, each reading what the last one gathered (from the
         same factors, traced once).
+    stop : callable or None
+        Polled after each patch's rows (a time budget spent, Ctrl-C): True abandons the
+        gather.
 
     Returns
     -------
-    radiosity : (N, 3) float64 [W m-2]
+    radiosity : (N, 3) float64 [W m-2], or None when ``stop`` abandoned the gather
     hidden : (N,) bool
     """
-    # a point on a black surface shows its emission whatever reaches it: no rows, no rays
-    lit = np.flatnonzero(np.asarray(reflectance).any(axis=1))
-    rows = engine.gather_rows(points[lit], normals[lit])
     hidden = np.zeros(len(points), dtype=bool)
-    scale = np.ones(len(lit))
+    closed = np.zeros(len(points), dtype=bool)
     if occluder is not None:
         _, scene_normals = triangle_areas_normals(scene.triangle_vertices())
         closed, hidden = occluder.probe_hemispheres(
             points, normals, scene_normals, scene.double_sided
         )
+    # a point on a black surface shows its emission whatever reaches it: no rows, no rays
+    lit = np.flatnonzero(np.asarray(reflectance).any(axis=1))
+    rows = engine.gather_rows(points[lit], normals[lit], stop)
+    if rows is None:
+        return None, hidden
+    scale = np.ones(len(lit))
+    if occluder is not None:
         row_sum, limit = rows.row_sum, ROW_FIX_LIMIT
         fix = closed[lit] & (np.abs(row_sum - 1.0) < limit) & (row_sum > 0)
         scale = np.where(fix, row_sum, 1.0)
@@ -445,8 +479,10 @@ def _gather(
     radiosity: np.ndarray,
     patch_radiosity: np.ndarray,
     new: np.ndarray,
-) -> tuple[RadiosityMesh, np.ndarray]:
-    """The new receivers' radiosity by a final gather; hidden ones marked in the mesh."""
+    stop: Callable[[], bool] | None = None,
+) -> tuple[RadiosityMesh, np.ndarray | None]:
+    """The new receivers' radiosity by a final gather (None: ``stop`` abandoned it);
+    hidden ones marked in the mesh."""
     points, _ = receiver_points(mesh, tol.ray_offset * engine.diagonal)
     gathered, hidden = final_gather(
         scene,
@@ -459,6 +495,7 @@ def _gather(
         mesh.receiver_reflectance[new],
         mesh.receiver_emitted_exitance[new],
         own=new,
+        stop=stop,
     )
     visible = np.array(mesh.receiver_visible, dtype=bool)
     visible[new] = ~hidden

@@ -23,7 +23,7 @@ import logging
 import threading
 from collections.abc import Callable, Generator, Iterable, Iterator
 from concurrent.futures import ThreadPoolExecutor
-from typing import TypeVar
+from typing import TypeVar, overload
 
 import numpy as np
 
@@ -268,11 +268,13 @@ class FormFactorEngine:
         computed. Cached and spilled columns are kept."""
         return {} if self.complete else pack_columns(list(self.pass_column_parts()))
 
-    def pass_column_parts(self) -> Iterator[dict[str, np.ndarray]]:
+    def pass_column_parts(self, every: bool = False) -> Iterator[dict[str, np.ndarray]]:
         """:meth:`pass_columns` a column at a time (:func:`~raytrad.core.columns.column_parts`),
         a spilled one read back only while it is handed on: what a checkpoint streams to
-        disk without holding every column at once. Nothing once every column is computed."""
-        if self.complete:
+        disk without holding every column at once. Nothing once every column is computed,
+        unless ``every`` (a solve cut short: its resume goes on shooting without a pass;
+        before :meth:`release_columns`)."""
+        if self.complete and not every:
             return
         for patch in self._pass_order().tolist():
             if patch in self._cache or patch in self._spill:
@@ -557,10 +559,18 @@ class FormFactorEngine:
         rows = self.gather_rows(points, normals)
         return gathered_irradiance(rows, radiosity, patch_radiosity), rows.row_sum
 
-    def gather_rows(self, points: np.ndarray, normals: np.ndarray) -> GatherRows:
+    @overload
+    def gather_rows(self, points: np.ndarray, normals: np.ndarray) -> GatherRows: ...
+    @overload
+    def gather_rows(
+        self, points: np.ndarray, normals: np.ndarray, stop: Callable[[], bool] | None
+    ) -> GatherRows | None: ...
+    def gather_rows(
+        self, points: np.ndarray, normals: np.ndarray, stop: Callable[[], bool] | None = None
+    ) -> GatherRows | None:
         """The balanced factors and near-field weights of new points to every patch, kept
-        to gather from several radiosities (:func:`~raytrad.core.gather.gathered_irradiance`)
-        without tracing again."""
+        to gather from several radiosities (:func:`gathered_irradiance`) without tracing
+        again; None when ``stop``, polled after each patch, says stop (the rest cancelled)."""
         points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
         normals = np.asarray(normals, dtype=np.float64).reshape(-1, 3)
         origins = points + tol.ray_offset * self.diagonal * normals
@@ -571,19 +581,21 @@ class FormFactorEngine:
         def work(patch: int) -> tuple[np.ndarray, np.ndarray, int, GatherWeights]:
             near = self._candidates(patch, points, normals, levels)
             part = None if sides is None else sides[near]
-            factors, rays, gather = self._factors(
-                points[near], normals[near], origins[near], patch, part
-            )
-            return near, factors, rays, compact_gather(gather, self._index)
+            found = self._factors(points[near], normals[near], origins[near], patch, part)
+            return near, found[0], found[1], compact_gather(found[2], self._index)
 
         patches = list(range(self.mesh.patch_count))
-        for patch, (near, factors, rays, gather) in zip(
-            patches, self._per_patch(work, patches), strict=True
-        ):
-            self.rays_cast += rays
-            factors = factors * self._col_scale[patch]
-            rows.row_sum[near] += factors
-            rows.patches.append((patch, near, factors, gather))
+        done = self._per_patch(work, patches)
+        try:
+            for patch, (near, factors, rays, gather) in zip(patches, done, strict=True):
+                self.rays_cast += rays
+                factors = factors * self._col_scale[patch]
+                rows.row_sum[near] += factors
+                rows.patches.append((patch, near, factors, gather))
+                if stop is not None and stop():
+                    return None
+        finally:
+            done.close()
         return rows
 
     def factors_at(self, points: np.ndarray, normals: np.ndarray, patch: int) -> np.ndarray:

@@ -49,16 +49,18 @@ def save_state(
     state: SolverState,
     key: dict[str, Any],
     columns: dict[str, np.ndarray] | Iterable[dict[str, np.ndarray]] | None = None,
+    whole_pass: bool = False,
 ) -> None:
     """Write ``state``, its fingerprint ``key`` and the ``columns`` of a form-factor pass
-    cut short to ``path`` atomically: packed
+    (cut short, or whole under a solve cut short) to ``path`` atomically: packed
     (:meth:`~raytrad.core.formfactor.FormFactorEngine.pass_columns`) or column by column
     (:meth:`~raytrad.core.formfactor.FormFactorEngine.pass_column_parts`), gathered on
     disk first (:class:`~raytrad.formats.checkpoint.Spool`) so that no more than a
-    column is held at once."""
+    column is held at once. ``whole_pass``: the columns are every column of a finished
+    pass, and ``state`` was shot through them (:func:`resume_point` keeps both)."""
     state_arrays, scalars = state.to_record()
     arrays: dict[str, Any] = dict(state_arrays)
-    record = {"fingerprint": key, "scalars": scalars}
+    record = {"fingerprint": key, "scalars": scalars, "whole_pass": whole_pass}
     if columns is None or isinstance(columns, dict):
         arrays |= {PASS + name: values for name, values in (columns or {}).items()}
         write_checkpoint(path, arrays, record)
@@ -82,6 +84,8 @@ def resume_point(
     A state saved while the pass was incomplete is dropped (None): its shots went through
     factors not yet balanced, so the solve starts again once the pass is done (those were
     only the first, direct-light shots), and a resumed run gives the uninterrupted answer.
+    A solve cut short after the pass saves every column with its state: both come back,
+    and the resume goes on shooting without tracing the pass again.
 
     Raises
     ------
@@ -89,30 +93,37 @@ def resume_point(
         As :func:`load_state`, when ``strict``.
     """
     if not Path(path).exists():
+        say = log.warning if strict else log.info  # batch jobs resume whenever they can
+        say("%s: no checkpoint to resume from; starting afresh", path)
         return None, None
     try:
         state = load_state(path, key)
-        columns = load_pass_columns(path)
+        columns, whole = _pass_columns(path)
     except RaytradError as exc:
         if strict:
             raise
         log.warning("%s; starting afresh", exc)
         return None, None
-    if columns:
+    if columns and not whole:
         log.info("resuming the form-factor pass from %s: %d columns", path, len(columns["patch"]))
         return None, columns
     log.info("resuming from %s at shot %d", path, state.shots)
-    return state, None
+    return state, columns or None
 
 
 def load_pass_columns(path: str | os.PathLike[str]) -> dict[str, np.ndarray]:
     """The form-factor columns :func:`save_state` stored in ``path`` ({} if none: the pass
     was complete). Read after :func:`load_state` has checked the fingerprint."""
-    arrays, _ = read_checkpoint(path)
+    return _pass_columns(path)[0]
+
+
+def _pass_columns(path: str | os.PathLike[str]) -> tuple[dict[str, np.ndarray], bool]:
+    """:func:`load_pass_columns`, and whether they are a whole pass (``whole_pass``)."""
+    arrays, record = read_checkpoint(path)
     columns = {name[len(PASS) :]: a for name, a in arrays.items() if name.startswith(PASS)}
     if columns and not _consistent(columns):
         raise RaytradError(f"{path}: cannot read checkpoint (its form-factor columns are damaged)")
-    return columns
+    return columns, bool(record.get("whole_pass", False))
 
 
 #: Packed column arrays, and the length array that partitions each.

@@ -3,6 +3,7 @@ refines."""
 
 from __future__ import annotations
 
+import itertools
 from collections.abc import Callable
 
 import numpy as np
@@ -141,6 +142,43 @@ def test_black_points_show_their_emission_without_rays(
     np.testing.assert_array_equal(every[black], emitted[black])
     np.testing.assert_array_equal(every[~black], lit)
     assert (lit[mesh.receiver_area[pick][~black] > 0] > 0).all()  # not hidden: lit
+
+
+def test_a_stop_within_a_round_keeps_the_look_of_the_round_before(
+    cornell_fine: tuple[Prepared, SolveResult],
+) -> None:
+    """A time limit spent during a round's gather (polled after each patch) ends
+    refinement there, without waiting for the round: its new receivers show what the mesh
+    before showed at their places, read here by probing that mesh."""
+    from raytrad.products.probe import radiosity_at
+
+    prepared, result = cornell_fine
+    polls = itertools.count()
+    out = refine_adaptively(
+        prepared.scene,
+        prepared.mesh,
+        prepared.engine,
+        prepared.occluder,
+        result.radiosity,
+        RefineSettings(),
+        stop=lambda: next(polls) >= 40,  # the first poll is before the round
+    )
+    assert out.stopped and out.rounds == 0 and out.added > 0
+    assert 40 < next(polls) < prepared.mesh.patch_count  # polled patch by patch
+    old = prepared.mesh.receiver_count
+    # the centres of the new triangles (a new corner, every corner seen) as each mesh shows
+    # them: the refined one by its corners' mean, the one before probed
+    corners = out.mesh.triangle_receivers
+    seen = np.asarray(out.mesh.receiver_visible)[corners].all(axis=1)
+    pick = np.flatnonzero((corners >= old).any(axis=1) & seen & (out.mesh.triangle_area > 0))
+    assert len(pick) > 100
+    centre = out.mesh.positions[out.mesh.triangles[pick]].mean(axis=1)
+    shown = radiosity_at(prepared.mesh, result.radiosity, centre, out.mesh.triangle_normal[pick])
+    probed = ~np.isnan(shown).any(axis=1)
+    assert probed.mean() > 0.99
+    got = out.radiosity[corners[pick]].mean(axis=1)
+    np.testing.assert_allclose(got[probed], shown[probed], rtol=1e-4, atol=1e-9)
+    np.testing.assert_array_equal(out.radiosity[:old], result.radiosity)
 
 
 def test_uniform_light_needs_no_refinement(prepare_furnace: Callable[..., Prepared]) -> None:
