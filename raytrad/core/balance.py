@@ -13,8 +13,12 @@ import numpy as np
 from raytrad.core import compiled
 from raytrad.core.mesh import RadiosityMesh
 
-#: Most row-and-column rounds of :func:`sinkhorn`.
-BALANCE_ITERATIONS = 500
+#: Most row-and-column rounds of :func:`sinkhorn`. Most scenes converge in a dozen (the
+#: Cornell box in 12). In a room of 36 blocks the change falls by about 2 % a round after
+#: the first few, and 500 rounds took a third of the pass at 31 000 receivers; after 100
+#: the column scales are within 1.2e-6 of their limit, and the radiosity within 9e-8 RMS
+#: (5.7e-5 at worst) of 500 rounds' (2026-12-02).
+BALANCE_ITERATIONS = 100
 #: Balancing stops when no column scale changes by more than this.
 BALANCE_CONVERGED = 1e-12
 
