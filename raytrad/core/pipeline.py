@@ -181,8 +181,9 @@ def prepare(
         balance = engine.balance(closed, column_done, stop=stop)
     if balance["complete"]:
         log.info(
-            "form factors: %d closed rows held to 1 (largest miss %.2e), %d patches held to "
-            "capture 1 (largest excess %.2e)",
+            "form factors balanced: %d receivers that see surfaces all round have their "
+            "factors summed to 1 (largest correction %.2e); %d patches whose factors sent "
+            "out more than they shoot were scaled down (largest excess %.2e)",
             balance["closed_rows"],
             balance["row_error"],
             balance["capped_columns"],
