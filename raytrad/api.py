@@ -154,9 +154,8 @@ def solve_scene(
 def refine(
     prepared: Prepared, result: SolveResult, settings: RenderSettings, stop: StopPoll = None
 ) -> tuple[Prepared, SolveResult, Refinement]:
-    """Adaptive refinement of a solve: the refined mesh (in a copy of ``prepared``), its
-    radiosity (in a copy of ``result``) and what was done
-    (:func:`raytrad.core.pipeline.refine_solution`; ``stop`` ends it, within a round too)."""
+    """Adaptive refinement of a solve: the refined mesh and radiosity (in copies of
+    ``prepared``, ``result``) and what was done (:func:`raytrad.core.pipeline.refine_solution`)."""
     return pipeline.refine_solution(prepared, result, settings.refine, stop)
 
 
@@ -274,7 +273,8 @@ def render(
                     prepared.mesh, prepared.engine, solve_settings, state, on_shot, stop
                 )
             error_log = monitor.finish(result.state)
-            if result.stop_reason in RESUMABLE:  # with every column: no pass on --resume
+            saved = result.stop_reason in RESUMABLE or budget.seconds is not None
+            if saved:  # every column: --resume goes on shooting, or refining, without a pass
                 save(result.state, whole=prepared.engine.complete)
             prepared.engine.release_columns()  # refinement and the outputs need none
             check_output_range(result.radiosity, scene_path)
@@ -289,7 +289,7 @@ def render(
                 if plot:
                     outputs["plot"] = output_dir / "convergence.png"
                     plot_convergence(outputs["plot"], {result.method: error_log}, str(scene_path))
-            if result.stop_reason in RESUMABLE:  # saved after the solve: resume from there
+            if saved and (result.stop_reason in RESUMABLE or refinement.stopped):
                 outputs["checkpoint"] = checkpoint
             elif checkpoint.exists():
                 checkpoint.unlink()

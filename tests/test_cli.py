@@ -303,6 +303,43 @@ def test_interrupted_render_resumes_to_the_same_answer(tmp_path: Path) -> None:
     np.testing.assert_array_equal(written, straight.result.radiosity.astype(np.float32))
 
 
+def test_a_time_limited_refinement_resumes_without_pass_or_solve(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A time-limited run whose refinement is cut keeps a checkpoint of the converged
+    solve with every column: ``--resume`` traces no pass, shoots no shot, refines to the
+    end and gives the uninterrupted bake."""
+    from raytrad.core import adaptive
+
+    scene = SCENES / "cornell-box.obj"
+    settings = RenderSettings(
+        mesh=MeshSettings(receivers=800, patches=60), solve=SolveSettings(time_limit=1000.0)
+    )
+    api.render(scene, tmp_path / "straight", settings)
+    gathering = [False]
+    original = adaptive._gather
+
+    def gather(*args: object, **kwargs: object) -> object:
+        gathering[0] = True  # the budget is spent once refinement gathers
+        return original(*args, **kwargs)
+
+    monkeypatch.setattr(adaptive, "_gather", gather)
+    out = tmp_path / "cut"
+    first = api.render(scene, out, settings, stop=lambda: gathering[0])
+    monkeypatch.setattr(adaptive, "_gather", original)
+    assert first.result.stop_reason == "converged" and first.refinement.stopped
+    assert first.outputs["checkpoint"].is_file()
+    second = api.render(scene, out, settings, resume=True)
+    resumed = second.report["resumed"]
+    assert resumed["form_factor_columns"] == first.prepared.mesh.patch_count
+    assert resumed["shots"] == first.result.state.shots == second.result.state.shots
+    assert second.report["solve"]["rays"] == 0 and not second.refinement.stopped
+    assert not (out / "cornell-box.checkpoint.npz").exists()
+    _, _, want = read_radiosity_ply(tmp_path / "straight" / "cornell-box.ply")
+    _, _, got = read_radiosity_ply(out / "cornell-box.ply")
+    np.testing.assert_array_equal(got, want)
+
+
 def test_a_stop_in_the_form_factor_pass_saves_and_resumes(tmp_path: Path) -> None:
     scene = SCENES / "cornell-box.obj"
     settings = RenderSettings(
