@@ -97,8 +97,9 @@ def resume_point(
         say("%s: no checkpoint to resume from; starting afresh", path)
         return None, None
     try:
-        state = load_state(path, key)
-        columns, whole = _pass_columns(path)
+        arrays, record = read_checkpoint(path)  # once: with a whole pass, hundreds of MB
+        state = _saved_state(path, arrays, record, key)
+        columns, whole = _pass_columns(path, arrays, record)
     except RaytradError as exc:
         if strict:
             raise
@@ -114,12 +115,14 @@ def resume_point(
 def load_pass_columns(path: str | os.PathLike[str]) -> dict[str, np.ndarray]:
     """The form-factor columns :func:`save_state` stored in ``path`` ({} if none: the pass
     was complete). Read after :func:`load_state` has checked the fingerprint."""
-    return _pass_columns(path)[0]
+    return _pass_columns(path, *read_checkpoint(path))[0]
 
 
-def _pass_columns(path: str | os.PathLike[str]) -> tuple[dict[str, np.ndarray], bool]:
-    """:func:`load_pass_columns`, and whether they are a whole pass (``whole_pass``)."""
-    arrays, record = read_checkpoint(path)
+def _pass_columns(
+    path: str | os.PathLike[str], arrays: dict[str, np.ndarray], record: dict[str, Any]
+) -> tuple[dict[str, np.ndarray], bool]:
+    """:func:`load_pass_columns` from a checkpoint's ``arrays`` and ``record``, and
+    whether they are a whole pass (``whole_pass``)."""
     columns = {name[len(PASS) :]: a for name, a in arrays.items() if name.startswith(PASS)}
     if columns and not _consistent(columns):
         raise RaytradError(f"{path}: cannot read checkpoint (its form-factor columns are damaged)")
@@ -158,7 +161,16 @@ def load_state(path: str | os.PathLike[str], key: dict[str, Any]) -> SolverState
         The file is unreadable, or was made for another system: the message names the
         first difference (a setting, a material, an object of the scene).
     """
-    arrays, record = read_checkpoint(path)
+    return _saved_state(path, *read_checkpoint(path), key)
+
+
+def _saved_state(
+    path: str | os.PathLike[str],
+    arrays: dict[str, np.ndarray],
+    record: dict[str, Any],
+    key: dict[str, Any],
+) -> SolverState:
+    """:func:`load_state` from a checkpoint's ``arrays`` and ``record``."""
     saved = record.get("fingerprint")
     change = difference(saved, key) if isinstance(saved, dict) else "its format is unknown"
     if change:
