@@ -15,6 +15,7 @@ import numpy as np
 KERNELS = (
     "_sort_ascending",
     "sum_shares",
+    "_gathered",
     "gather_sums",
     "block_irradiance",
 )
@@ -90,20 +91,25 @@ def sum_shares(pair, source, weight, pairs):
     return out_pointer, out_source[:count].copy(), out_weight[:count].copy()
 
 
+def _gathered(g, pointer, sources, weights, radiosity):
+    """Near receiver ``g``'s weighted sum of ``radiosity`` rows, (s0, s1, s2)."""
+    s0 = s1 = s2 = 0.0
+    for k in range(pointer[g], pointer[g + 1]):
+        w = float(weights[k])
+        b = radiosity[sources[k]]
+        s0 += w * b[0]
+        s1 += w * b[1]
+        s2 += w * b[2]
+    return s0, s1, s2
+
+
 def gather_sums(pointer, sources, weights, radiosity):
     """(G, 3) weighted sums of ``radiosity`` rows per near receiver (CSR ``pointer`` into
     ``sources`` and ``weights``; :meth:`raytrad.core.gather.GatherWeights.gathered`)."""
     count = len(pointer) - 1
     out = np.zeros((count, 3))
     for g in range(count):
-        s0 = s1 = s2 = 0.0
-        for k in range(pointer[g], pointer[g + 1]):
-            w = float(weights[k])
-            b = radiosity[sources[k]]
-            s0 += w * b[0]
-            s1 += w * b[1]
-            s2 += w * b[2]
-        out[g, 0], out[g, 1], out[g, 2] = s0, s1, s2
+        out[g, 0], out[g, 1], out[g, 2] = _gathered(g, pointer, sources, weights, radiosity)
     return out
 
 
@@ -120,13 +126,7 @@ def block_irradiance(out, mean, near, factors, local, pointer, sources, weights,
         out[j, 1] += f * b1
         out[j, 2] += f * b2
     for g in range(len(local)):
-        s0 = s1 = s2 = 0.0
-        for k in range(pointer[g], pointer[g + 1]):
-            w = float(weights[k])
-            source = sources[k]
-            s0 += w * radiosity[source, 0]
-            s1 += w * radiosity[source, 1]
-            s2 += w * radiosity[source, 2]
+        s0, s1, s2 = _gathered(g, pointer, sources, weights, radiosity)
         i = local[g]
         j, f = near[i], factors[i]
         out[j, 0] += f * (s0 - b0)
