@@ -65,7 +65,7 @@ def _solid_hides(h_o, h_v, kind, lo, hi, margin, lift, gap):
     for k in range(lo, hi):
         if kind[k] == FACE and h_o[k] >= 2.0 * margin:
             outside = True
-        if kind[k] == HOLE and h_o[k] > -margin:
+        if kind[k] == HOLE and h_o[k] > -0.5 * lift:
             return False
     if not outside:
         return False

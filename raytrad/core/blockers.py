@@ -27,11 +27,19 @@ so the float32 rays Embree traces cross it with room to spare. A pair is called 
 only when also
 
 * the origin is outside the solid by twice the margin (through a face, not the hole),
-  and on the inner side of the hole's plane, or on one side of a sheet's plane by the
-  margin with every corner on the other side by the margin; and
+  and on the inner side of the hole's plane by half a ray offset, or on one side of a
+  sheet's plane by the margin with every corner on the other side by the margin; and
 * for a solid, the blocking point is further than twice the ray offset from the ray's
   end (rays stop half an offset short of their target), bounded below from the corners'
   parameters and the patch's distance.
+
+Half a ray offset on the hole's side is enough: along a segment from such an origin to
+a point of the shrunk solid, the depth below the hole's plane never falls under the
+origin's, so the segment enters the solid through a face at least that far from the
+hole's rim (a ray offset is 1e-5 of the scene's diagonal, float32 rounding 6e-8 of it).
+That admits the receivers on the surface a box stands on (a ray offset above the hole's
+plane), the ones a box hides most (2026-12-02, Cornell box: 46 % fewer rays in
+refinement, 19 % fewer in the pass, the same factors to the bit).
 
 The test is conservative: a blocked pair is one whose samples the unculled pass traces
 as all blocked, so its factors and gather weights are the unculled pass's exactly (zero);
@@ -177,7 +185,7 @@ def numpy_blocked(
             ok &= (crossing <= -m).all(axis=(1, 2))
         else:
             faces, holes = kind == FACE, kind == HOLE
-            ok = (h_o[:, faces] >= 2.0 * m).any(axis=1) & (h_o[:, holes] <= -m).all(axis=1)
+            ok = (h_o[:, faces] >= 2.0 * m).any(axis=1) & (h_o[:, holes] <= -0.5 * lift).all(axis=1)
             # Cyrus-Beck: each segment's parameters inside the shrunk planes
             start = h_o + m  # (C, K): o against the shrunk planes
             slope = (h_v + m)[None, :, :] - start[:, None, :]  # (C, V, K)

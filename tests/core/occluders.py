@@ -104,6 +104,14 @@ CASES = {
         np.array([[0.0, 1.0, 0.0]]),
         None,
     ),
+    # a box open at the bottom standing on a floor, receivers on the floor (a ray offset
+    # above the open face's plane) and a plate behind it: some are hidden
+    "behind a box on the floor": (
+        box(np.array([0, 1, 2.0]), np.array([1.2, 1.0, 0.3]), bottom=False),
+        PLATE + np.array([0, 0.2, 0]),
+        SWEEP * [1, 0, 1] + [0, LIFT, 0],
+        True,
+    ),
     # a small box wholly inside the shaft: rays pass round it
     "inside the shaft": (
         box(np.array([0, 1, 2.0]), np.array([0.2, 0.2, 0.2])),
