@@ -67,7 +67,7 @@ def sum_shares(pair, source, weight, pairs):
     out_pointer = np.zeros(pairs + 1, dtype=np.int64)
     count = 0
     for p in range(pairs):
-        used = 0
+        used = np.int64(0)
         for k in range(pointer[p], pointer[p + 1]):
             i = order[k]
             s = source[i]

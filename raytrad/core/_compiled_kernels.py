@@ -5,6 +5,12 @@ Plain Python as written here; :func:`raytrad.core.compiled.get` compiles every f
 module, helpers first, so that the kernels call each other compiled. Each computes the
 same formula, in the same order, as its numpy reference in :mod:`raytrad.core.kernels`;
 see there for shapes, units and sources.
+
+An integer handed to a helper starts as ``np.int64(0)``, never the literal ``0``, in
+every ``_compiled_*`` module: while numba infers a loop's types it first sees such a
+counter as ``Literal[int](0)`` and compiles the helper for that too, then again for
+``int64`` (a second compile of the near field's triangle step cost about a second of a
+first run's compiling).
 """
 
 # mypy: ignore-errors
@@ -78,11 +84,11 @@ def clipped_factor(tri, x, n, work):
     h1 = (tri[1, 0] - x[0]) * n[0] + (tri[1, 1] - x[1]) * n[1] + (tri[1, 2] - x[2]) * n[2]
     h2 = (tri[2, 0] - x[0]) * n[0] + (tri[2, 1] - x[1]) * n[1] + (tri[2, 2] - x[2]) * n[2]
     if h0 >= 0.0 and h1 >= 0.0 and h2 >= 0.0:
-        return lambert(tri, 3, x, n)
+        return lambert(tri, np.int64(3), x, n)
     if not (h0 > 0.0 or h1 > 0.0 or h2 > 0.0):
         return 0.0
     h = (h0, h1, h2)
-    count = 0
+    count = np.int64(0)
     for k in range(3):
         j = (k + 1) % 3
         ha, hb = h[k], h[j]
@@ -198,7 +204,7 @@ def clipped_outline(start, end, lo, hi, x, n):
 def clipped_contour_form_factor(start, end, points, normals):
     out = np.empty(len(points))
     for i in range(len(points)):
-        out[i] = clipped_outline(start, end, 0, len(start), points[i], normals[i])
+        out[i] = clipped_outline(start, end, np.int64(0), len(start), points[i], normals[i])
     return out
 
 
@@ -229,7 +235,7 @@ def planar_contour_form_factor(start, end, points, normals, patch_normal, patch_
         if low >= -band:
             out[i] = _unit_outline_factor(start, end, successor, x, n, unit)
         else:
-            out[i] = clipped_outline(start, end, 0, len(start), x, n)
+            out[i] = clipped_outline(start, end, np.int64(0), len(start), x, n)
     return out
 
 
@@ -358,7 +364,7 @@ def _visible_centroid(tri, x, n, horizon, out):
             out[d] = (tri[0, d] + tri[1, d] + tri[2, d]) / 3.0
         return
     h = (h0, h1, h2)
-    count = 0
+    count = np.int64(0)
     out[0] = out[1] = out[2] = 0.0
     for k in range(3):
         j = (k + 1) % 3
@@ -425,7 +431,7 @@ def visibility_rays(origins, far, sub_targets, near_c, near_targets, shift, shor
     t = np.empty(count, dtype=np.float32)
     far_c = np.empty(far_count, dtype=np.int64)
     far_s = np.empty(far_count, dtype=np.int64)
-    i = 0
+    i = np.int64(0)
     for c in range(far.shape[0]):
         for s in range(far.shape[1]):
             if far[c, s]:

@@ -306,8 +306,8 @@ def near_triangles(
     limits = (band, horizon, lift, share_sizes)
     rules = (grid3, grid2, rule, rule_weight)
     scratch = (np.empty((3, 3)), np.empty((4, 3)), _k.grid_scratch(grid3))
-    k = 0
-    h = 0
+    k = np.int64(0)
+    h = np.int64(0)
     for c in range(near.shape[0]):
         x, n = points[c], normals[c]
         for s in range(near.shape[1]):

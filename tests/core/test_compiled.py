@@ -188,6 +188,43 @@ def test_a_render_calls_only_listed_signatures(tmp_path) -> None:
         assert not missing, f"{name} {missing}: rerun python tools/kernel_signatures.py"
 
 
+#: Run in a fresh process with an empty cache: compile every listed kernel, and print the
+#: helpers numba compiled for a literal argument type.
+_LITERAL_COMPILES = """
+import numba
+from numba.core import event
+from raytrad.core import compiled
+from raytrad.core._kernel_signatures import SIGNATURES
+kernels = compiled._dispatchers(numba)
+with event.install_recorder("numba:compile") as recorder:
+    for name, signatures in SIGNATURES.items():
+        compiled._compile(numba, kernels[name], signatures)
+for _, e in recorder.buffer:
+    if e.is_start and "Literal" in str(e.data["args"]):
+        print(e.data["dispatcher"].py_func.__name__, e.data["args"])
+"""
+
+
+@pytest.mark.slow
+def test_no_helper_compiles_twice_for_a_literal(tmp_path) -> None:
+    """A helper called with a counter that starts as the literal 0 compiles once for
+    ``Literal[int](0)`` and again for ``int64`` (about a second of a first run's compiling
+    for the near field's triangle step): counters start as ``np.int64(0)``."""
+    import os
+    import subprocess
+    import sys
+
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path), "RAYTRAD_COMPILERS": "1"}
+    done = subprocess.run(
+        [sys.executable, "-c", _LITERAL_COMPILES],
+        capture_output=True,
+        text=True,
+        env=env,
+        check=True,
+    )
+    assert done.stdout.strip() == ""
+
+
 def test_listed_signatures_are_numba_signatures() -> None:
     import numba
 
