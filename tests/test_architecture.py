@@ -18,7 +18,7 @@ PACKAGE = REPOSITORY / "raytrad"
 
 #: Layers from the bottom up; a module may import only from its own layer or below.
 LAYERS = (
-    ("raytrad", "raytrad.errors", "raytrad.constants"),
+    ("raytrad", "raytrad.errors", "raytrad.constants", "raytrad.arrays"),
     ("raytrad.formats",),
     ("raytrad.scene",),
     ("raytrad.scenefiles",),

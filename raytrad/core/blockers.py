@@ -56,6 +56,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from raytrad.arrays import unique
 from raytrad.constants import tol
 from raytrad.core import compiled
 from raytrad.core.shafts import plane_hull, prism
@@ -247,7 +248,7 @@ def blockers(positions: np.ndarray, triangles: np.ndarray, diagonal: float) -> B
         found = _convex(points, welded[part], flat)
         if found is not None:
             planes.append(found)
-            used = points[np.unique(welded[part])]
+            used = points[unique(welded[part])]
             center = 0.5 * (used.min(axis=0) + used.max(axis=0))
             spheres.append((center, float(np.linalg.norm(used - center, axis=1).max()) + flat))
     if not planes:
@@ -294,10 +295,10 @@ def _convex(
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
     """A component's planes (normals, offsets, kinds) if it is a convex blocker."""
     edges = np.sort(triangles[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
-    unique, count = np.unique(edges, axis=0, return_counts=True)
+    distinct, count = np.unique(edges, axis=0, return_counts=True)
     if (count > 2).any():
         return None
-    used = np.unique(triangles)
+    used = unique(triangles)
     corners = points[triangles]
     area, normal = triangle_areas_normals(corners)
     offset = np.einsum("tj,tj->t", normal, corners[:, 0])
@@ -314,9 +315,9 @@ def _convex(
     _, first = np.unique(key, axis=0, return_index=True)
     normal, offset = normal[first], offset[first]
     kind = np.full(len(offset), FACE)
-    rim = unique[count == 1]
+    rim = distinct[count == 1]
     if len(rim):
-        hole = _hole(points[np.unique(rim)], points[used], flat)
+        hole = _hole(points[unique(rim)], points[used], flat)
         if hole is None:
             return None
         normal = np.vstack([normal, hole[0]])

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from raytrad.arrays import unique
 from raytrad.core.mesh import RadiosityMesh
 
 
@@ -49,7 +50,7 @@ def fill_hidden(mesh: RadiosityMesh, radiosity: np.ndarray, rings: int = 64) -> 
     filled = ~known[a]  # only hidden receivers are filled: the edges from them
     a, b = a[filled], b[filled]
     count = len(out)
-    key = np.unique(a.astype(np.int64) * count + b)  # each neighbour once, sorted by a, b
+    key = unique(a.astype(np.int64) * count + b)  # each neighbour once, sorted by a, b
     a, b = key // count, key % count
     for _ in range(rings):
         todo = ~known

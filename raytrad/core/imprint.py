@@ -27,6 +27,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from raytrad.arrays import unique
 from raytrad.constants import sign_with_band
 from raytrad.core.refine import edge_keys, unique_edges
 from raytrad.scene import barycentric_coordinates, triangle_areas_normals
@@ -47,6 +48,10 @@ PLANE_BAND = 1e-9
 
 #: Rounds of snapping and splitting: a round re-tests the edges a neighbour's move blocked.
 IMPRINT_ROUNDS = 4
+
+#: Candidate items are taken in at most this many classes of reach, each a factor 2
+#: below the last (:func:`_candidate_pairs`); smaller items join the last class.
+REACH_CLASSES = 12
 
 #: An edge is not split nearer its end than this fraction of its length (a sliver).
 MIN_SPLIT = 0.02
@@ -148,7 +153,7 @@ def imprint_outlines(
     corners = positions[triangles]
     longest = float(np.linalg.norm(corners - np.roll(corners, 1, axis=1), axis=2).max())
     near, _ = _candidate_pairs(corners.mean(axis=1), outlines.points, 2.0 * longest)
-    near = np.unique(near)
+    near = unique(near)
     if len(near) == 0:
         return positions, triangles, parent, 0
     positions, part, part_parent, changed = _imprint_rounds(
@@ -271,7 +276,7 @@ def _vertex_sources(
 ) -> tuple[np.ndarray, np.ndarray]:
     """The scene triangles each vertex lies in, as CSR: ``(pointer (V + 1,), source)``."""
     width = int(triangle_source.max()) + 1
-    pairs = np.unique(triangles.reshape(-1) * width + np.repeat(triangle_source, 3))
+    pairs = unique(triangles.reshape(-1) * width + np.repeat(triangle_source, 3))
     pointer = np.searchsorted(pairs // width, np.arange(count + 1))
     return pointer, pairs % width
 
@@ -294,8 +299,8 @@ def _crossing_snaps(
     owner = np.empty(len(edges), dtype=np.int64)
     owner[tri_edges.reshape(-1)] = np.repeat(np.arange(len(triangles)), 3)
     a, b = positions[edges[:, 0]], positions[edges[:, 1]]
-    cell = float(np.linalg.norm(b - a, axis=1).max())
-    edge_index, segment_index = _candidate_pairs(0.5 * (a + b), outlines.points, cell)
+    length = np.linalg.norm(b - a, axis=1)
+    edge_index, segment_index = _candidate_pairs(0.5 * (a + b), outlines.points, length)
     tri = owner[edge_index]
     keep = triangle_surface[tri] != outlines.surface[segment_index]
     edge_index, segment_index, tri = edge_index[keep], segment_index[keep], tri[keep]
@@ -356,7 +361,7 @@ def _outline_corners(
     end_surface = np.concatenate([outlines.surface, outlines.surface])
     end_normal = np.concatenate([outlines.normal, outlines.normal])
     corners = positions[triangles]
-    longest = np.linalg.norm(corners - np.roll(corners, 1, axis=1), axis=2).max()
+    longest = np.linalg.norm(corners - np.roll(corners, 1, axis=1), axis=2).max(axis=1)
     tri, end = _candidate_pairs(corners.mean(axis=1), np.stack([ends, ends], 1), longest)
     keep = triangle_surface[tri] != end_surface[end]
     tri, end = tri[keep], end[keep]
@@ -417,12 +422,54 @@ def _insert_corners(
 
 
 def _candidate_pairs(
+    midpoints: np.ndarray, segments: np.ndarray, reach: float | np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """(item, segment) pairs whose item point (an edge's midpoint, a triangle's centroid)
+    lies within ``reach`` of the segment [m]: a superset of the edges crossing each
+    segment (an edge crossing it at X has its midpoint within half its length of X) and
+    of the triangles holding a segment's end. Found by sorting cell keys rather than
+    testing every pair: an item within one cell of a point sampled along the segment
+    every cell (X lies within half a cell of a sample), then measured.
+
+    ``reach`` is one distance for every item, or (N,) each item's own [m]. Items are then
+    taken in classes of reach a factor 2 apart, each with cells as large as its largest
+    reach, so that a few long edges (a wall's) do not make every item a candidate of every
+    segment. Pairs come sorted by item, then segment.
+    """
+    reach = np.broadcast_to(np.asarray(reach, dtype=np.float64), (len(midpoints),))
+    if len(midpoints) == 0 or len(segments) == 0:
+        return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
+    top = max(float(reach.max()), np.finfo(np.float64).tiny)
+    length = float(np.linalg.norm(segments[:, 1] - segments[:, 0], axis=1).sum())
+    level = np.floor(np.log2(top / np.maximum(reach, top * 2.0**-REACH_CLASSES)))
+    keys = []
+    for k in unique(level.astype(np.int64)).tolist():
+        rows = np.flatnonzero(level == k)
+        # cells no finer than a few samples along the segments per item of the class
+        cell = max(float(reach[rows].max()), length / (4.0 * (len(rows) + len(segments))))
+        item, segment = _cell_pairs(midpoints[rows], segments, cell)
+        keys.append(rows[item] * len(segments) + segment)
+    pairs = unique(np.concatenate(keys))
+    item, segment = pairs // len(segments), pairs % len(segments)
+    near = _distance_to_segment(midpoints[item], segments[segment]) <= reach[item] * (1 + 1e-9)
+    return item[near], segment[near]
+
+
+def _distance_to_segment(points: np.ndarray, segments: np.ndarray) -> np.ndarray:
+    """(K,) distance of each point (K, 3) from its segment (K, 2, 3) [m]."""
+    p, q = segments[:, 0], segments[:, 1]
+    direction = q - p
+    square = _dot(direction, direction)
+    t = np.clip(_dot(points - p, direction) / np.where(square > 0, square, 1.0), 0.0, 1.0)
+    gap = points - p - t[:, None] * direction
+    return np.sqrt(_dot(gap, gap))
+
+
+def _cell_pairs(
     midpoints: np.ndarray, segments: np.ndarray, cell: float
 ) -> tuple[np.ndarray, np.ndarray]:
-    """(edge, segment) pairs whose edge midpoint lies within one cell of a point sampled
-    along the segment every ``cell`` [m]: a superset of the edges crossing each segment
-    (an edge crossing at X has its midpoint within cell/2 of X, X within cell/2 of a
-    sample), found by sorting cell keys rather than testing every pair."""
+    """(item, segment) pairs of :func:`_candidate_pairs` for one cell size [m] (unsorted,
+    with repeats)."""
     length = np.linalg.norm(segments[:, 1] - segments[:, 0], axis=1)
     steps = np.ceil(length / cell).astype(np.int64) + 1
     owner = np.repeat(np.arange(len(segments)), steps)
@@ -449,8 +496,7 @@ def _candidate_pairs(
     pair_owner = np.repeat(key_owner, count)
     start = np.repeat(lo - (np.cumsum(count) - count), count)
     edge_index = by_key[start + np.arange(int(count.sum()))]
-    pairs = np.unique(edge_index * len(segments) + pair_owner)
-    return pairs // len(segments), pairs % len(segments)
+    return edge_index, pair_owner
 
 
 def _cell_key(cells: np.ndarray) -> np.ndarray:
@@ -554,7 +600,7 @@ def _accept_moves(
             break
         moves = np.where(live, length[np.maximum(slots, 0)], -1.0)
         longest = slots[np.arange(len(slots)), np.argmax(moves, axis=1)]
-        undo = np.unique(longest[live.any(axis=1)])
+        undo = unique(longest[live.any(axis=1)])
         active[undo] = False
         positions[vertex[undo]] = original[undo]
     return vertex[active]

@@ -20,6 +20,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from raytrad.arrays import unique
 from raytrad.constants import scene_diagonal, scene_extent, tol
 from raytrad.core.imprint import Outlines, imprint_outlines, outline_segments
 from raytrad.core.intersections import intersection_segments
@@ -207,7 +208,7 @@ def build_mesh(
     base_area, _ = triangle_areas_normals(positions[triangles])
     total_area = float(base_area.sum())
     if not (total_area > 0.0 and math.isfinite(total_area)):
-        extent = scene_extent(scene.positions[np.unique(scene.triangles)])
+        extent = scene_extent(scene.positions[unique(scene.triangles)])
         raise SceneError(
             scene.source,
             f"no surface is left once vertices closer than {extent * tol.merge:.3g} m are "
@@ -292,7 +293,7 @@ def _imprint(
     lines where surfaces pass through each other (a block sunk into the floor)
     (:func:`~raytrad.core.imprint.imprint_outlines`,
     :func:`~raytrad.core.intersections.intersection_segments`)."""
-    gap = COVER_GAP * scene_diagonal(coarse[np.unique(triangles)])
+    gap = COVER_GAP * scene_diagonal(coarse[unique(triangles)])
     positions, fine, parent, changed = imprint_outlines(
         positions,
         fine,
@@ -385,7 +386,7 @@ def _enclosed_triangles(
 
 def _surface_triangles(scene: Scene) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Merged vertices and the triangle list, with a reversed copy of each double-sided one."""
-    extent = scene_extent(scene.positions[np.unique(scene.triangles)])
+    extent = scene_extent(scene.positions[unique(scene.triangles)])
     positions, triangles = merge_vertices(scene.positions, scene.triangles, extent * tol.merge)
     material = scene.material_index
     two = scene.double_sided
@@ -414,9 +415,9 @@ def surface_receivers(
     corner_surface = np.repeat(surface, 3)
     stride = int(corner_surface.max(initial=0)) + 1
     key = corner_vertex.astype(np.int64) * stride + corner_surface  # sorts as (vertex, surface)
-    unique, inverse = np.unique(key, return_inverse=True)
+    distinct, inverse = np.unique(key, return_inverse=True)
     inverse = inverse.reshape(-1)
-    count = len(unique)
+    count = len(distinct)
     third = np.repeat(area / 3.0, 3)
     r_area = np.bincount(inverse, weights=third, minlength=count)
     r_normal = np.zeros((count, 3))
@@ -440,7 +441,7 @@ def surface_receivers(
     first = order[np.searchsorted(inverse[order], np.arange(count))]
     r_inward = centroid[first]
     r_normal /= np.linalg.norm(r_normal, axis=1)[:, None]
-    return inverse.reshape(-1, 3), positions[unique // stride], r_normal, r_area, r_inward
+    return inverse.reshape(-1, 3), positions[distinct // stride], r_normal, r_area, r_inward
 
 
 def _subareas(

@@ -7,6 +7,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from raytrad.arrays import unique
 from raytrad.constants import tol
 from raytrad.core.mesh import RadiosityMesh
 
@@ -20,7 +21,7 @@ def group(labels: np.ndarray, count: int) -> tuple[np.ndarray, np.ndarray]:
 def patch_vertices(mesh: RadiosityMesh) -> tuple[np.ndarray, np.ndarray]:
     """The distinct vertices of each patch's triangles, grouped by patch (CSR)."""
     stride = np.int64(len(mesh.positions))
-    key = np.unique(
+    key = unique(
         np.repeat(mesh.triangle_patch, 3).astype(np.int64) * stride + mesh.triangles.reshape(-1)
     )
     patch = key // stride  # sorted by patch, then vertex
@@ -108,10 +109,10 @@ def folded_pieces(mesh: RadiosityMesh) -> Pieces:
     folded = ~np.asarray(mesh.patch_planar, bool)[mesh.triangle_patch]
     key = mesh.triangle_patch * (int(mesh.triangle_source.max(initial=0)) + 1)
     key = key + mesh.triangle_source
-    unique, first, inverse = np.unique(key[folded], return_index=True, return_inverse=True)
+    distinct, first, inverse = np.unique(key[folded], return_index=True, return_inverse=True)
     labels = np.full(len(key), -1, np.int64)
     labels[folded] = inverse.reshape(-1)
-    start, end, edge_ptr = boundary_edges(mesh, labels, len(unique))
+    start, end, edge_ptr = boundary_edges(mesh, labels, len(distinct))
     own = np.flatnonzero(folded)[first]  # a triangle of each piece
     piece_patch = mesh.triangle_patch[own]
     return Pieces(

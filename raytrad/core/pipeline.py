@@ -21,6 +21,7 @@ from typing import Any
 
 import numpy as np
 
+from raytrad.arrays import unique
 from raytrad.constants import defaults, scene_extent, tol
 from raytrad.core.accuracy import (
     RAYS,
@@ -150,7 +151,7 @@ def prepare(
     if not has_emission(scene):  # after repair, which may have dropped the emitters
         log.warning("%s: the scene has no emitter; every radiosity is zero", scene.source)
     with timed(timings, "acceleration"):
-        extent = scene_extent(scene.positions[np.unique(scene.triangles)])
+        extent = scene_extent(scene.positions[unique(scene.triangles)])
         occluder = None
         if not nothing_can_occlude(scene.positions, scene.triangles, tol.plane * extent):
             occluder = Occluder(scene.positions, scene.triangles)

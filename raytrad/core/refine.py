@@ -13,6 +13,7 @@ from collections.abc import Callable
 
 import numpy as np
 
+from raytrad.arrays import unique
 from raytrad.constants import tol
 from raytrad.scene import triangle_areas_normals
 
@@ -34,7 +35,7 @@ def merge_vertices(
     positions : (V', 3) float64
     triangles : (T, 3) int64, re-indexed
     """
-    used = np.unique(triangles)
+    used = unique(triangles)
     key = np.round((positions[used] - positions[used].min(axis=0)) / tolerance).astype(np.int64)
     _, first, inverse = np.unique(key, axis=0, return_index=True, return_inverse=True)
     remap = np.full(positions.shape[0], -1, dtype=np.int64)
@@ -52,8 +53,8 @@ def unique_edges(triangles: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Unique undirected edges and, per triangle, the index of edge k = (v_k, v_{k+1})."""
     count = int(triangles.max()) + 1 if triangles.size else 1
     keys = edge_keys(triangles, np.roll(triangles, -1, axis=1), count)  # (T, 3)
-    unique, inverse = np.unique(keys.reshape(-1), return_inverse=True)
-    edges = np.stack([unique // count, unique % count], axis=1)
+    distinct, inverse = np.unique(keys.reshape(-1), return_inverse=True)
+    edges = np.stack([distinct // count, distinct % count], axis=1)
     return edges, inverse.reshape(-1, 3)
 
 

@@ -19,6 +19,7 @@ from dataclasses import replace
 
 import numpy as np
 
+from raytrad.arrays import unique
 from raytrad.constants import scene_extent, tol
 from raytrad.core.refine import merge_vertices, unique_edges
 from raytrad.scene import Scene, triangle_areas_normals
@@ -28,7 +29,7 @@ log = logging.getLogger(__name__)
 
 def repair_scene(scene: Scene) -> Scene:
     """The scene without duplicate faces and with consistent winding (see module doc)."""
-    extent = scene_extent(scene.positions[np.unique(scene.triangles)])
+    extent = scene_extent(scene.positions[unique(scene.triangles)])
     where = scene.source or "<scene>"
     scene = _split_t_junctions(scene, extent, where)
     _, merged = merge_vertices(scene.positions, scene.triangles, extent * tol.merge)
@@ -96,7 +97,7 @@ def inverted_faces(triangles: np.ndarray, areas: np.ndarray) -> np.ndarray:
     disagree = d[:, 0] == d[:, 1]
     label, parity = _parity_components(count, f, disagree)
     flip = np.zeros(count, dtype=bool)
-    for part in np.unique(label[parity == 1]):
+    for part in unique(label[parity == 1]):
         members = label == part
         odd = members & (parity == 1)
         if areas[odd].sum() < areas[members & (parity == 0)].sum():
@@ -252,7 +253,7 @@ def _same_surface_only(
 
 def _vertex_inside_edges(positions: np.ndarray, edges: np.ndarray, tolerance: float) -> np.ndarray:
     """(E,) index of a vertex strictly inside each edge (closest to its middle), else -1."""
-    used = np.unique(edges)
+    used = unique(edges)
     points = positions[used]
     out = np.full(len(edges), -1, dtype=np.int64)
     chunk = max(1, 2_000_000 // max(len(points), 1))

@@ -19,6 +19,7 @@ from typing import TypeVar
 
 import numpy as np
 
+from raytrad.arrays import unique
 from raytrad.constants import scene_diagonal, tol
 
 log = logging.getLogger(__name__)
@@ -120,7 +121,7 @@ class Occluder:
         positions = np.asarray(positions, dtype=np.float64)
         #: The blocking geometry, world coordinates (for shaft culling).
         self.positions, self.triangles = positions, np.asarray(triangles)
-        used = np.unique(triangles)
+        used = unique(triangles)
         lo, hi = positions[used].min(axis=0), positions[used].max(axis=0)
         self.origin = 0.5 * (lo + hi)
         self.diagonal = scene_diagonal(np.stack([lo, hi]))
@@ -380,7 +381,7 @@ def nothing_can_occlude(positions: np.ndarray, triangles: np.ndarray, tolerance:
     tolerance : float
         Distance behind a plane still counted as on it [m].
     """
-    points = positions[np.unique(triangles)]
+    points = positions[unique(triangles)]
     if len(points) * len(triangles) > 50_000_000:
         return False  # too big to prove convex cheaply; rays decide instead
     corners = positions[triangles]

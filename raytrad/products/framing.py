@@ -17,6 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
+from raytrad.arrays import unique
 from raytrad.constants import defaults
 from raytrad.core.mesh import RadiosityMesh
 from raytrad.core.shading import triangle_normals, twin_triangles
@@ -122,7 +123,7 @@ def automatic_camera(
     """
     lit_triangle = _lit_triangles(mesh, radiosity)
     regions = [mesh.positions]
-    lit_points = mesh.positions[np.unique(mesh.triangles[lit_triangle])]
+    lit_points = mesh.positions[unique(mesh.triangles[lit_triangle])]
     if lit_triangle.any() and _smaller(lit_points, mesh.positions):
         regions.append(lit_points)
     candidates = [c for region in regions for c in _candidate_cameras(region, vertical_fov_deg, up)]

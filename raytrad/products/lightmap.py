@@ -35,6 +35,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from raytrad.arrays import unique
 from raytrad.constants import defaults
 from raytrad.core.mesh import RadiosityMesh
 from raytrad.errors import SceneError, SettingsError
@@ -377,7 +378,7 @@ def bake_lightmap(
     if isinstance(settings.uv_set, int) and existing_uv is None:
         raise SettingsError(f"uv set {settings.uv_set} was asked for but no UVs were given")
     started = time.perf_counter()
-    rows = np.arange(len(mesh.triangles)) if triangles is None else np.unique(triangles)
+    rows = np.arange(len(mesh.triangles)) if triangles is None else unique(triangles)
     uv, size = lightmap_uvs(mesh, settings, existing_uv, source_corners, rows)
     priority = None
     if existing_uv is not None and source_corners is not None:

@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
+from raytrad.arrays import unique
 from raytrad.constants import FLOAT32_MAX, tol
 from raytrad.errors import SceneError
 
@@ -267,7 +268,7 @@ def validate_scene(scene: Scene) -> Scene:
     nv = scene.positions.shape[0]
     if scene.triangles.min() < 0 or scene.triangles.max() >= nv:
         raise SceneError(src, f"a face refers to a vertex outside 0..{nv - 1}")
-    used = np.unique(scene.triangles)
+    used = unique(scene.triangles)
     bad = ~np.isfinite(scene.positions[used]).all(axis=1)
     if bad.any():
         raise SceneError(

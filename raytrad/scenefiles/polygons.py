@@ -13,6 +13,8 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from raytrad.arrays import unique
+
 
 def triangulate_polygons(
     positions: np.ndarray, polygons: Sequence[np.ndarray] | np.ndarray
@@ -70,7 +72,7 @@ def _by_length(
         return {array.shape[1]: (np.arange(len(array)), array.astype(np.int64))}
     lengths = np.array([len(p) for p in polygons], dtype=np.int64)
     groups = {}
-    for k in np.unique(lengths[lengths >= 3]).tolist():
+    for k in unique(lengths[lengths >= 3]).tolist():
         faces = np.flatnonzero(lengths == k)
         corners = [np.asarray(polygons[int(i)]) for i in faces]
         groups[k] = (faces, np.stack(corners).astype(np.int64))

@@ -269,3 +269,31 @@ def test_the_floor_at_the_cornell_blocks_feet_agrees_with_a_gather(
         ratios.append(baked[:, 1].mean() / gathered[:, 1].mean())
     print("floor 2 and 5 mm from the blocks' feet, bake / gather:", np.round(ratios, 3))
     np.testing.assert_allclose(ratios, 1.0, atol=0.04)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_candidate_pairs_are_the_items_within_reach(seed: int) -> None:
+    """Every (item, segment) pair whose point lies within the item's reach of the
+    segment, and no other, whatever the spread of reaches (a few long wall edges among
+    many short ones): measured pair by pair."""
+    from raytrad.core.imprint import _candidate_pairs
+
+    rng = np.random.default_rng(seed)
+    points = rng.uniform(0.0, 4.0, (3000, 3))
+    reach = np.exp(rng.uniform(np.log(1e-3), np.log(0.5), len(points)))
+    start = rng.uniform(0.0, 4.0, (60, 3))
+    segments = np.stack([start, start + rng.normal(0.0, 0.3, (60, 3))], axis=1)
+    segments[:5, 1] = segments[:5, 0]  # points, as the outlines' ends are passed
+    p, d = segments[:, 0], segments[:, 1] - segments[:, 0]
+    square = np.maximum((d * d).sum(axis=1), 1e-300)
+    rel = points[:, None, :] - p[None]  # (N, S, 3)
+    t = np.clip((rel * d[None]).sum(axis=2) / square[None], 0.0, 1.0)
+    distance = np.linalg.norm(rel - t[..., None] * d[None], axis=2)
+    item, segment = np.nonzero(distance <= reach[:, None])
+    got_item, got_segment = _candidate_pairs(points, segments, reach)
+    np.testing.assert_array_equal(got_item, item)
+    np.testing.assert_array_equal(got_segment, segment)
+    one_item, one_segment = _candidate_pairs(points, segments, 0.2)
+    expected = np.nonzero(distance <= 0.2)
+    np.testing.assert_array_equal(one_item, expected[0])
+    np.testing.assert_array_equal(one_segment, expected[1])
