@@ -17,6 +17,7 @@ KERNELS = (
     "_outside_pyramid",
     "_facet_outside",
     "_beyond_patch",
+    "_capsule_misses",
     "shaft_clear",
     "_heights",
     "_sheet_hides",
@@ -106,6 +107,8 @@ def blocked_pairs(
     out = np.zeros(len(origins), dtype=np.bool_)
     h_v = _heights(corners, normal, offset)
     h_o = np.empty(len(offset))
+    count = len(radius)
+    recent = np.int64(0)  # the blocker that hid the last origin: tried first
     for i in range(len(origins)):
         o = origins[i]
         dx = patch_center[0] - o[0]
@@ -113,7 +116,10 @@ def blocked_pairs(
         dz = patch_center[2] - o[2]
         length2 = dx * dx + dy * dy + dz * dz
         gap = math.sqrt(length2) - reach
-        for b in range(len(radius)):
+        for step in range(count):
+            b = step - 1 if 0 < step <= recent else step  # recent, then the rest in order
+            if step == 0:
+                b = recent
             cx, cy, cz = center[b, 0] - o[0], center[b, 1] - o[1], center[b, 2] - o[2]
             t = (cx * dx + cy * dy + cz * dz) / length2 if length2 > 0.0 else 0.0
             t = min(max(t, 0.0), 1.0)
@@ -133,6 +139,7 @@ def blocked_pairs(
                 hides = _solid_hides(h_o, h_v, kind, lo, hi, margin, lift, gap)
             if hides:
                 out[i] = True
+                recent = b
                 break
     return out
 
@@ -168,32 +175,46 @@ def shaft_clear(
     if tail < 64:
         last = (np.uint64(1) << np.uint64(tail)) - np.uint64(1)
     out = np.ones(origins.shape[0], dtype=np.bool_)
+    recent = np.int64(-1)  # the facet that left the last receiver in doubt: tried first
     for c in range(origins.shape[0]):
         ox, oy, oz = origins[c, 0], origins[c, 1], origins[c, 2]
         dx = patch_center[0] - ox
         dy = patch_center[1] - oy
         dz = patch_center[2] - oz
         length2 = dx * dx + dy * dy + dz * dz
-        for w in range(words):
-            same = (sides[c, w] & patch_sides[w]) | (sides[c, words + w] & patch_sides[words + w])
-            cand = ~same
-            if w == words - 1:
-                cand &= last
+        for w in range(-1, words):
+            if w < 0:  # the recent facet alone, if a candidate
+                if recent < 0:
+                    continue
+                k = recent // 64
+                cand = np.uint64(1) << np.uint64(recent % 64)
+                cand &= ~(
+                    (sides[c, k] & patch_sides[k]) | (sides[c, words + k] & patch_sides[words + k])
+                )
+            else:
+                same = (sides[c, w] & patch_sides[w]) | (
+                    sides[c, words + w] & patch_sides[words + w]
+                )
+                cand = ~same
+                if w == words - 1:
+                    cand &= last
+                if 0 <= recent and recent // 64 == w:
+                    cand &= ~(np.uint64(1) << np.uint64(recent % 64))
+            base = 64 * (recent // 64) if w < 0 else 64 * w
             while cand != np.uint64(0):
                 low = cand & (~cand + np.uint64(1))
                 cand ^= low
-                q = 64 * w + int(math.log2(float(low)))
-                px = centers[q, 0] - ox
-                py = centers[q, 1] - oy
-                pz = centers[q, 2] - oz
-                t = 0.0
-                if length2 > 0.0:
-                    t = min(max((px * dx + py * dy + pz * dz) / length2, 0.0), 1.0)
-                ex = px - t * dx
-                ey = py - t * dy
-                ez = pz - t * dz
-                reach = radii[q] + patch_reach
-                if ex * ex + ey * ey + ez * ez > reach * reach:
+                q = base + int(math.log2(float(low)))
+                if _capsule_misses(
+                    centers[q, 0] - ox,
+                    centers[q, 1] - oy,
+                    centers[q, 2] - oz,
+                    dx,
+                    dy,
+                    dz,
+                    length2,
+                    radii[q] + patch_reach,
+                ):
                     continue
                 height = normals[q, 0] * ox + normals[q, 1] * oy + normals[q, 2] * oz - offsets[q]
                 if not _outside_pyramid(
@@ -215,10 +236,23 @@ def shaft_clear(
                     ox, oy, oz, hull, hull_ptr[q], hull_ptr[q + 1], outline, patch_normal, limits
                 ):
                     out[c] = False
+                    recent = q
                     break
             if not out[c]:
                 break
     return out
+
+
+def _capsule_misses(px, py, pz, dx, dy, dz, length2, reach):
+    """Whether a sphere at ``p`` (relative to a ray origin) lies farther than ``reach``
+    from the segment from the origin to ``d`` (``length2 = |d|^2``)."""
+    t = 0.0
+    if length2 > 0.0:
+        t = min(max((px * dx + py * dy + pz * dz) / length2, 0.0), 1.0)
+    ex = px - t * dx
+    ey = py - t * dy
+    ez = pz - t * dz
+    return ex * ex + ey * ey + ez * ez > reach * reach
 
 
 def _outside_pyramid(ox, oy, oz, height, band, hull, a, b, dx, dy, dz, reach, targets, margin):
