@@ -3,12 +3,12 @@ the same run.
 
 Three tables:
 
-1. **Pass against raw Embree.** The Cornell box's form-factor pass (every column, as
-   ``raytrad render`` computes it before the first shot) is timed with its rays
-   recorded, with shaft culling and convex blockers (the default), with shaft culling
-   alone and tracing every pair; each pass's rays
-   are then replayed through embreex's occlusion query, with the same threads, in the
-   same process. The last column sets each pass against raw Embree doing the unculled
+1. **Pass against raw Embree.** The scene's form-factor pass (every column, as
+   ``raytrad render`` computes it before the first shot) is timed with shaft culling and
+   convex blockers (the default), with shaft culling alone and tracing every pair; the
+   default and unculled passes are run again with their rays recorded, and those rays
+   replayed through embreex's occlusion query, with the same threads, in the same
+   process. The last column sets each pass against raw Embree doing the unculled
    pass's job: above 100% the pass finishes the job faster than Embree alone traces it.
    ``rays / naive`` sets rays cast against receivers x samples of the pairs that see
    each other.
@@ -16,7 +16,7 @@ Three tables:
    ``RAYTRAD_KERNELS=numpy`` (the numpy reference kernels) in the same process, and the
    check that every variant gives the same factors; then a default solve over the cached
    columns with the compiled shot and with ``numpy_shoot``, against the pass time.
-3. **Whole renders and scale.** ``raytrad render`` of the bundled Cornell box at each
+3. **Whole renders and scale.** ``raytrad render`` of the scene at each
    ``--receivers``, as a child process: seconds per stage from ``report.json``, shots,
    rays and peak memory; with ``--previous RAYTRAD`` (the ``raytrad`` executable of
    another install, e.g. the previous release in its own venv) the same renders by it,
@@ -27,7 +27,11 @@ Three tables:
    fastest render of this one at least as accurate by both errors: the speed-up at
    equal accuracy.
 
+The scene is the bundled Cornell box unless ``--scene`` names another file (any format
+``raytrad render`` reads; ``--accuracy`` needs the Cornell box, whose reference it has).
+
     python tools/bench_performance.py                                # 5000 receivers
+    python tools/bench_performance.py --scene scenes/blocks-room.obj --no-renders
     python tools/bench_performance.py --receivers 5000 20000 --previous ../venv-prev/bin/raytrad
 """
 
@@ -66,6 +70,8 @@ from raytrad.scene import triangle_areas_normals  # noqa: E402
 from raytrad.scene.builtin import cornell_box  # noqa: E402
 
 SCENE = ROOT / "scenes" / "cornell-box.obj"
+#: The scene file the tables measure (``--scene``).
+_CHOSEN = {"scene": SCENE}
 #: bench_accuracy's defaults (``--per-quad``, ``--along``, ``--paths``): its cached reference.
 PROBES_PER_QUAD, PROBES_ALONG, PATHS = 256, 8, 20000
 #: PLY vertices darker than this share of the median are taken as hidden (:func:`ply_at`).
@@ -75,6 +81,15 @@ _MEASURE = (
     "import resource, subprocess, sys; subprocess.run(sys.argv[1:], check=True); "
     "print(resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss)"
 )
+
+
+@functools.cache
+def _scene() -> Any:
+    """The scene of ``--scene``, loaded once."""
+    from raytrad import api
+    from raytrad.settings import RenderSettings
+
+    return api.load(_CHOSEN["scene"], RenderSettings()).scene
 
 
 def timed_pass(
@@ -97,12 +112,22 @@ def timed_pass(
     if not convex:
         pairs.blockers = lambda *_: None  # type: ignore[assignment]
     try:
-        prepared = prepare(cornell_box(), MeshSettings(receivers=receivers))
+        prepared = prepare(_scene(), MeshSettings(receivers=receivers))
     finally:
         Occluder.occluded_local = original  # type: ignore[method-assign]
         pipeline.FormFactorEngine = engine  # type: ignore[misc]
         pairs.blockers = find
     return prepared.timings["form_factors"], prepared, batches
+
+
+def _replayed(receivers: int, cull: bool) -> tuple[float, int]:
+    """(seconds, rays) of embreex answering a pass's occlusion queries, recorded in a run
+    of the pass of its own."""
+    _, prepared, batches = timed_pass(receivers, record=True, cull=cull)
+    try:
+        return replay(prepared.occluder, batches)
+    finally:
+        prepared.close()
 
 
 def _dense(engine: object, patch: int) -> np.ndarray:
@@ -148,23 +173,24 @@ def pass_table(receivers: int) -> None:
     from raytrad.core import compiled
 
     compiled.get()  # compile (or load) before timing
-    prepare(cornell_box(), MeshSettings(receivers=200)).close()
-    seconds, prepared, batches = timed_pass(receivers, record=True)
+    prepare(_scene(), MeshSettings(receivers=200)).close()
+    # each pass is timed without recording its rays (copying them costs up to a third of
+    # a pass), and run again recording them for the replay
+    seconds, prepared, _ = timed_pass(receivers, record=False)
     try:
-        embree, rays = replay(prepared.occluder, batches)
         naive = prepared.engine.rays_naive
         factors = [_dense(prepared.engine, p) for p in range(0, prepared.mesh.patch_count, 7)]
         solve_fast, shots = _solve_seconds(prepared, solver._shoot)
         solve_numpy, _ = _solve_seconds(prepared, solver.numpy_shoot)
     finally:
         prepared.close()
-    every_seconds, every, every_batches = timed_pass(receivers, record=True, cull=False)
+    embree, rays = _replayed(receivers, cull=True)
+    every_seconds, every, _ = timed_pass(receivers, record=False, cull=False)
     try:
-        every_embree, every_rays = replay(every.occluder, every_batches)
         every_worst = _worst(every, factors)
     finally:
         every.close()
-    del every_batches
+    every_embree, every_rays = _replayed(receivers, cull=False)
     shafts_seconds, shafts_only, _ = timed_pass(receivers, record=False, convex=False)
     shafts_rays = shafts_only.engine.rays_cast  # type: ignore[attr-defined]
     shafts_worst = _worst(shafts_only, factors)
@@ -178,7 +204,7 @@ def pass_table(receivers: int) -> None:
     finally:
         del os.environ["RAYTRAD_KERNELS"]
     print(
-        f"\nform-factor pass, Cornell box, --receivers {receivers} "
+        f"\nform-factor pass, {_CHOSEN['scene'].name}, --receivers {receivers} "
         f"({prepared.mesh.receiver_count} receivers, {prepared.mesh.patch_count} patches; "
         f"naive count receivers x samples: {naive:.3g} rays)"
     )
@@ -221,7 +247,8 @@ def render_once(raytrad: str, receivers: int, truth: Truth | None) -> dict[str, 
         # a small Python parent runs the render, so that the child's peak memory is its
         # own (a child forked from this process would count this process's memory too)
         start = time.perf_counter()
-        command = [raytrad, "render", str(SCENE), "-o", out, "--receivers", str(receivers), "-q"]
+        scene = _CHOSEN["scene"]
+        command = [raytrad, "render", str(scene), "-o", out, "--receivers", str(receivers), "-q"]
         done = subprocess.run(
             [sys.executable, "-c", _MEASURE, *command],
             check=True,
@@ -231,7 +258,7 @@ def render_once(raytrad: str, receivers: int, truth: Truth | None) -> dict[str, 
         wall = time.perf_counter() - start
         peak_kib = float(done.stdout.split()[-1])
         report = json.loads((Path(out) / "report.json").read_text())
-        errors = {} if truth is None else truth.errors(Path(out) / f"{SCENE.stem}.ply")
+        errors = {} if truth is None else truth.errors(Path(out) / f"{scene.stem}.ply")
     timings = report["timings_seconds"]
     return {
         "wall": wall,
@@ -397,6 +424,9 @@ def main(argv: list[str] | None = None) -> int:
         default=[5000],
         help="--receivers targets: the pass tables use the first, the render table all",
     )
+    parser.add_argument(
+        "--scene", type=Path, default=SCENE, help="scene file [the bundled Cornell box]"
+    )
     parser.add_argument("--previous", default=None, help="another install's raytrad executable")
     parser.add_argument("--runs", type=int, default=1, help="renders per size and install")
     parser.add_argument("--no-pass", action="store_true", help="skip the pass tables")
@@ -413,6 +443,9 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     if args.accuracy and args.no_renders:
         parser.error("--accuracy scores the renders: it cannot go with --no-renders")
+    if args.accuracy and args.scene.resolve() != SCENE.resolve():
+        parser.error("--accuracy has a reference for the bundled Cornell box only")
+    _CHOSEN["scene"] = args.scene.resolve()
     if not args.no_pass:
         pass_table(args.receivers[0])
     if not args.no_renders:

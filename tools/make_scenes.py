@@ -2,7 +2,8 @@
 :mod:`raytrad.scene.builtin`.
 
 Writes ``cornell-box.obj``/``.mtl``, ``furnace.obj``/``.mtl`` (reflectance 0.5, emitted
-exitance 1 W m-2), ``shadow.glb`` (glTF, so its double-sided occluder stays
+exitance 1 W m-2), ``blocks-room.obj``/``.mtl`` (36 blocks on a room's floor: many
+objects), ``shadow.glb`` (glTF, so its double-sided occluder stays
 double-sided) and ``cornell-box-uv.glb``: the Cornell box as a game asset would come, one
 node per object, authored lightmap UVs in ``TEXCOORD_1`` (an xatlas layout for a 256 x 256
 lightmap) and two cameras, ``front`` (the Cornell box camera) and ``corner`` (16:9).
@@ -33,17 +34,19 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     if str(REPOSITORY) not in sys.path:  # run from a checkout without installing raytrad
         sys.path.insert(0, str(REPOSITORY))
-    from raytrad.scene.builtin import cornell_box, furnace_box, shadow_scene
+    from raytrad.scene.builtin import blocks_room, cornell_box, furnace_box, shadow_scene
     from raytrad.scenefiles import write_glb, write_obj
 
     out: Path = args.out
     write_obj(cornell_box(), out / "cornell-box.obj")
     write_obj(furnace_box(reflectance=0.5, emitted_exitance=1.0), out / "furnace.obj")
     write_glb(shadow_scene(), out / "shadow.glb")
+    write_obj(blocks_room(), out / "blocks-room.obj")
     lightmapped, cameras = _lightmapped_cornell_box()
     write_glb(lightmapped, out / "cornell-box-uv.glb", cameras)
     log.info(
-        "wrote cornell-box.obj/.mtl, furnace.obj/.mtl, shadow.glb and cornell-box-uv.glb to %s",
+        "wrote cornell-box.obj/.mtl, furnace.obj/.mtl, shadow.glb, cornell-box-uv.glb and "
+        "blocks-room.obj/.mtl to %s",
         out,
     )
     return 0

@@ -225,7 +225,39 @@ def test_shadow_scene_geometry_and_materials() -> None:
 
 
 def test_builtin_scene_registry() -> None:
-    assert set(BUILTIN_SCENES) == {"cornell-box", "furnace", "shadow"}
+    assert set(BUILTIN_SCENES) == {"cornell-box", "furnace", "shadow", "blocks-room"}
     for name, build in BUILTIN_SCENES.items():
         scene = build()
         assert isinstance(scene, Scene) and scene.triangle_count > 0, name
+
+
+def test_blocks_room_counts_bounds_power_and_footprints() -> None:
+    """36 blocks of five quads in a closed 4 x 3 x 4 m room, each standing on the floor
+    inside its own cell of the floor's 6 x 6 grid (so no two touch); the light is 1 m2
+    of 10 W m-2."""
+    from raytrad.scene.builtin import blocks_room
+
+    scene = blocks_room()
+    assert scene.triangle_count == 2 * (7 + 5 * 36)
+    np.testing.assert_array_equal(scene.positions.min(axis=0), [0.0, 0.0, 0.0])
+    np.testing.assert_array_equal(scene.positions.max(axis=0), [4.0, 3.0, 4.0])
+    corners = scene.positions[scene.triangles]
+    area, _ = triangle_areas_normals(corners)
+    light = scene.material_index == scene.material_names.index("light")
+    emitted = area[light] @ scene.material_emitted_exitance[scene.material_index[light]]
+    np.testing.assert_allclose(emitted, [10.0, 10.0, 10.0], rtol=1e-12)
+    names = [n for n in scene.object_names if n.startswith("block-")]
+    assert len(names) == 36
+    for name in names:
+        i, j = (int(k) for k in name.split("-")[1:])
+        mine = corners[scene.object_index == scene.object_names.index(name)].reshape(-1, 3)
+        assert len(mine) == 30  # 10 triangles
+        assert mine[:, 1].min() == 0.0 and 0.2 <= mine[:, 1].max() <= 1.0
+        cell = np.array([4.0, 4.0]) / 6
+        lo, hi = mine[:, [0, 2]].min(axis=0), mine[:, [0, 2]].max(axis=0)
+        assert (lo > np.array([i, j]) * cell).all() and (hi < np.array([i + 1, j + 1]) * cell).all()
+    same, other = blocks_room(seed=1), blocks_room(seed=2)
+    np.testing.assert_array_equal(same.positions, scene.positions)
+    assert not np.array_equal(other.positions, scene.positions)
+    with pytest.raises(SettingsError):
+        blocks_room(0)
