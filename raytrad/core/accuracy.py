@@ -37,6 +37,8 @@ at every earlier log point, that point's guaranteed algebraic bound to the final
 
 from __future__ import annotations
 
+from collections.abc import Iterator
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
@@ -47,7 +49,7 @@ from raytrad.core.hidden import fill_hidden
 from raytrad.core.mesh import RadiosityMesh
 from raytrad.core.pathtrace import Tracer, cosine_directions_from
 from raytrad.core.shading import shade, triangle_normals, twin_triangles
-from raytrad.core.visibility import Occluder
+from raytrad.core.visibility import Occluder, ordered_map, worker_count
 from raytrad.scene import Scene
 
 #: Points sampled for the discretisation part.
@@ -288,27 +290,41 @@ def _gathered(
     variance = np.zeros((len(tri), 3))
     shut = np.zeros(len(tri), dtype=bool)
     occluder = Occluder(mesh.positions, mesh.triangles)
+    workers = worker_count()
     try:
         tracer = Tracer(scene, occluder, rng)
         origin = occluder.to_local(points) + tol.ray_margin * occluder.diagonal * normals
-        for start in range(0, len(tri), _CHUNK):
-            part = slice(start, min(start + _CHUNK, len(tri)))
+
+        def draws() -> Iterator[tuple[slice, np.ndarray, np.ndarray]]:
+            """Each chunk's stratified uniforms, drawn here in order (the same numbers
+            however the threads run)."""
+            for start in range(0, len(tri), _CHUNK):
+                part = slice(start, min(start + _CHUNK, len(tri)))
+                n = part.stop - part.start
+                yield part, _strata(n, light_side, rng), _strata(n, side, rng)
+
+        def work(
+            item: tuple[slice, np.ndarray, np.ndarray],
+        ) -> tuple[slice, np.ndarray, np.ndarray]:
+            part, u_light, u = item
             n = part.stop - part.start
-            u = _strata(n, light_side, rng)
             o = np.repeat(origin[part], light_side**2, axis=0)
-            light = tracer.direct(o, np.repeat(normals[part], light_side**2, axis=0), u)
-            u = _strata(n, side, rng)
+            light = tracer.direct(o, np.repeat(normals[part], light_side**2, axis=0), u_light)
             normal = np.repeat(normals[part], side**2, axis=0)
             direction = cosine_directions_from(normal, u[:, 0], u[:, 1])
             o = np.repeat(origin[part], side**2, axis=0)
             hit, _, w = occluder.intersect_barycentric_local(o, direction)
             seen = shade(hit, w, direction, mesh, reflected, triangle_normal, twin)
             halves = _halves(light, n, light_side) + _halves(seen, n, side)  # (n, 2, 3)
-            irradiance[part] = halves.mean(axis=1)
-            variance[part] = (halves[:, 0] - halves[:, 1]) ** 2 / 4.0
             back = _back_hits(hit, direction, triangle_normal, twin).reshape(n, -1)
             front = ((hit >= 0).reshape(n, -1) & ~back).any(axis=1)
-            shut[part] = (back.mean(axis=1) > 0.5) | (back.any(axis=1) & ~front)
+            return part, halves, (back.mean(axis=1) > 0.5) | (back.any(axis=1) & ~front)
+
+        with ThreadPoolExecutor(workers, thread_name_prefix="raytrad-error") as pool:
+            for part, halves, shut_in in ordered_map(pool, work, draws(), 2 * workers):
+                irradiance[part] = halves.mean(axis=1)
+                variance[part] = (halves[:, 0] - halves[:, 1]) ** 2 / 4.0
+                shut[part] = shut_in
     finally:
         occluder.close()
     return irradiance, variance, shut

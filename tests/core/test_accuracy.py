@@ -5,6 +5,7 @@ from __future__ import annotations
 from collections.abc import Callable
 
 import numpy as np
+import pytest
 
 from raytrad.core.accuracy import (
     ErrorParts,
@@ -175,3 +176,23 @@ def test_an_error_confined_to_a_spot_is_found_at_every_seed(
         )
         assert residual.error[1] >= truth
         assert residual.error[1] <= 3.0 * truth
+
+
+def test_the_estimate_does_not_depend_on_the_threads(
+    prepare_furnace: Callable[..., Prepared], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Chunks are traced on every core, their random numbers drawn in order beforehand:
+    one thread and two give the same numbers to the bit."""
+    prepared = prepare_furnace(0.5, 1.0)
+    mesh = prepared.mesh
+    wrong = np.full((mesh.receiver_count, 3), 2.2)
+    found = []
+    for threads in ("1", "2"):
+        monkeypatch.setenv("RAYTRAD_THREADS", threads)
+        found.append(
+            discretisation_error(
+                prepared.scene, mesh, wrong, counted_receivers(mesh), 1.0, samples=300, rays=256
+            )
+        )
+    np.testing.assert_array_equal(found[0].residual, found[1].residual)
+    np.testing.assert_array_equal(found[0].error, found[1].error)
