@@ -103,7 +103,8 @@ def blocked_pairs(
     lift,
 ):
     """(N,) bool: origins from which one blocker hides every corner (see
-    :func:`raytrad.core.blockers.numpy_blocked`)."""
+    :func:`raytrad.core.blockers.numpy_blocked`); the blocker that hid the last origin
+    is tried first."""
     out = np.zeros(len(origins), dtype=np.bool_)
     h_v = _heights(corners, normal, offset)
     h_o = np.empty(len(offset))
@@ -165,7 +166,8 @@ def shaft_clear(
     """Receivers whose shaft to a patch no facet can block (see
     :func:`raytrad.core.shafts.numpy_shaft_clear`): per receiver, the candidate facets are
     a few word operations on packed side bits; only those get the capsule, pyramid and
-    separating-plane tests."""
+    separating-plane tests, the facet that kept the last receiver in doubt first (it
+    mostly keeps its neighbour in doubt too, and one such facet settles the answer)."""
     flat = margins[0]
     limits = np.array([margins[0], margins[1], margins[2], margins[3], band])
     count = len(radii)

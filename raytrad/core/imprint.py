@@ -453,7 +453,7 @@ def _candidate_pairs(
             i, j = item[a : a + _PAIRS_AT_ONCE], segment[a : a + _PAIRS_AT_ONCE]
             near = _distance_to_segment(midpoints[i], segments[j]) <= reach[i] * (1 + 1e-9)
             keys.append(i[near] * len(segments) + j[near])
-    pairs = unique(np.concatenate(keys))
+    pairs = unique(np.concatenate(keys)) if keys else np.zeros(0, dtype=np.int64)
     return pairs // len(segments), pairs % len(segments)
 
 

@@ -297,3 +297,5 @@ def test_candidate_pairs_are_the_items_within_reach(seed: int) -> None:
     expected = np.nonzero(distance <= 0.2)
     np.testing.assert_array_equal(one_item, expected[0])
     np.testing.assert_array_equal(one_segment, expected[1])
+    far_item, far_segment = _candidate_pairs(points, segments + 100.0, reach)
+    assert len(far_item) == 0 and len(far_segment) == 0  # none near: none, not an error
