@@ -338,10 +338,17 @@ def _crossing_snaps(
 def _foot(point: np.ndarray, p: np.ndarray, q: np.ndarray, normal: np.ndarray) -> np.ndarray:
     """(N, 3) the nearest point of segment p-q to ``point``, moved along ``normal`` into the
     plane through ``point``."""
-    direction = q - p
-    t = np.clip(_dot(point - p, direction) / _dot(direction, direction), 0.0, 1.0)
-    foot = p + t[:, None] * direction
+    foot = _nearest_on_segment(point, p, q)
     return foot - _dot(normal, foot - point)[:, None] * normal
+
+
+def _nearest_on_segment(point: np.ndarray, p: np.ndarray, q: np.ndarray) -> np.ndarray:
+    """(N, 3) the nearest point of each segment p-q (N, 3 each; p itself when p = q) to
+    each ``point`` (N, 3) [m]."""
+    direction = q - p
+    square = _dot(direction, direction)
+    t = np.clip(_dot(point - p, direction) / np.where(square > 0, square, 1.0), 0.0, 1.0)
+    return p + t[:, None] * direction
 
 
 def _outline_corners(
@@ -405,7 +412,7 @@ def _insert_corners(
     edge_k = (np.argmin(weights, axis=1) + 1) % 3  # the edge opposite the least weight
     a = triangles[tri, edge_k]
     b = triangles[tri, (edge_k + 1) % 3]
-    foot = _foot(point, positions[a], positions[b], np.zeros_like(point))
+    foot = _nearest_on_segment(point, positions[a], positions[b])
     inner = ~near
     count = len(positions)
     x = count + np.arange(int(inner.sum()))
@@ -464,11 +471,7 @@ _PAIRS_AT_ONCE = 1 << 16
 
 def _distance_to_segment(points: np.ndarray, segments: np.ndarray) -> np.ndarray:
     """(K,) distance of each point (K, 3) from its segment (K, 2, 3) [m]."""
-    p, q = segments[:, 0], segments[:, 1]
-    direction = q - p
-    square = _dot(direction, direction)
-    t = np.clip(_dot(points - p, direction) / np.where(square > 0, square, 1.0), 0.0, 1.0)
-    gap = points - p - t[:, None] * direction
+    gap = points - _nearest_on_segment(points, segments[:, 0], segments[:, 1])
     return np.sqrt(_dot(gap, gap))
 
 
