@@ -22,27 +22,40 @@ KERNELS = (
 
 
 def patch_spread(
-    entry_receiver,
-    entry_patch,
-    entry_weight,
-    emission,
-    reflectance,
-    irradiance,
-    entry_shot,
-    unshot,
-    patch_count,
+    entry_receiver, entry_patch, entry_weight, radiosity, entry_shot, unshot, patch_count
 ):
     """Per patch ``sum_k W_pk |dB_pk - dB_p|`` and ``max_k |dB_pk|`` (see
-    :meth:`raytrad.core.system.DiscreteSystem.numpy_spread`)."""
+    :meth:`raytrad.core.system.DiscreteSystem.numpy_spread`). The entries come by receiver,
+    so the patch being summed is held in registers while it stays the same (the same sums
+    in the same order)."""
     spread = np.zeros((patch_count, 3))
     peak = np.zeros((patch_count, 3))
+    held = -1
+    s0 = s1 = s2 = m0 = m1 = m2 = u0 = u1 = u2 = 0.0
     for e in range(len(entry_receiver)):
         k = entry_receiver[e]
         p = entry_patch[e]
-        for c in range(3):
-            own = emission[k, c] + reflectance[k, c] * irradiance[k, c] - entry_shot[e, c]
-            spread[p, c] += entry_weight[e] * abs(own - unshot[p, c])
-            peak[p, c] = max(peak[p, c], abs(own))
+        if p != held:
+            if held >= 0:
+                spread[held, 0], spread[held, 1], spread[held, 2] = s0, s1, s2
+                peak[held, 0], peak[held, 1], peak[held, 2] = m0, m1, m2
+            held = p
+            s0, s1, s2 = spread[p, 0], spread[p, 1], spread[p, 2]
+            m0, m1, m2 = peak[p, 0], peak[p, 1], peak[p, 2]
+            u0, u1, u2 = unshot[p, 0], unshot[p, 1], unshot[p, 2]
+        w = entry_weight[e]
+        own0 = radiosity[k, 0] - entry_shot[e, 0]
+        own1 = radiosity[k, 1] - entry_shot[e, 1]
+        own2 = radiosity[k, 2] - entry_shot[e, 2]
+        s0 += w * abs(own0 - u0)
+        s1 += w * abs(own1 - u1)
+        s2 += w * abs(own2 - u2)
+        m0 = max(m0, abs(own0))
+        m1 = max(m1, abs(own1))
+        m2 = max(m2, abs(own2))
+    if held >= 0:
+        spread[held, 0], spread[held, 1], spread[held, 2] = s0, s1, s2
+        peak[held, 0], peak[held, 1], peak[held, 2] = m0, m1, m2
     return spread, peak
 
 
@@ -67,10 +80,13 @@ def shoot(
     emission,
     reflectance,
     irradiance,
+    radiosity,
     entry_shot,
     amount,
     receivers,
-    factors,
+    raw_factors,
+    row_scale,
+    column_scale,
     near_receivers,
     near_pointer,
     near_sources,
@@ -91,41 +107,62 @@ def shoot(
     :func:`raytrad.core.solver.numpy_shoot`, the reference, for the steps). Returns the
     power caught by the receivers, the power they reflect ((3,) each, [W]) and
     ``sum_j a_j F_jp`` [m2]. The patch's sub-areas and clusters (nodes ``sub_lo:sub_hi``)
-    get the means of its receivers' shots at ``scratch[base + s]`` (their CSR ``mean_*``)."""
+    get the means of its receivers' shots at ``scratch[base + s]`` (their CSR ``mean_*``).
+    ``radiosity`` (``emission + reflectance * irradiance``) is kept with the irradiance.
+    The column's factors are ``raw_factors * (row_scale[receivers] * column_scale)``
+    (balanced; ``raw_factors`` when ``row_scale`` is empty)."""
+    count = len(receivers)
+    factors = np.empty(count)
+    if len(row_scale):
+        for r in range(count):
+            factors[r] = raw_factors[r] * (row_scale[receivers[r]] * column_scale)
+    else:
+        for r in range(count):
+            factors[r] = raw_factors[r]
     n = len(entries)
     own = np.empty((n, 3))
-    mean = np.zeros(3)
+    mean0 = mean1 = mean2 = 0.0
     for i in range(n):
         e = entries[i]
         k = entry_receiver[e]
+        w = entry_weight[e]
         for c in range(3):
-            own[i, c] = emission[k, c] + reflectance[k, c] * irradiance[k, c] - entry_shot[e, c]
-            mean[c] += entry_weight[e] * own[i, c]
+            own[i, c] = radiosity[k, c] - entry_shot[e, c]
+        mean0 += w * own[i, 0]
+        mean1 += w * own[i, 1]
+        mean2 += w * own[i, 2]
+    over0, over1, over2 = amount[0] - mean0, amount[1] - mean1, amount[2] - mean2
     for i in range(n):
         e = entries[i]
         k = entry_receiver[e]
-        for c in range(3):
-            value = own[i, c] + (amount[c] - mean[c])
-            entry_shot[e, c] += value
-            scratch[k, c] = value
-    count = len(receivers)
-    received = np.empty((count, 3))
-    for r in range(count):
-        for c in range(3):
-            received[r, c] = factors[r] * amount[c]
+        v0, v1, v2 = own[i, 0] + over0, own[i, 1] + over1, own[i, 2] + over2
+        entry_shot[e, 0] += v0
+        entry_shot[e, 1] += v1
+        entry_shot[e, 2] += v2
+        scratch[k, 0], scratch[k, 1], scratch[k, 2] = v0, v1, v2
     near_count = len(near_receivers)
+    near = np.empty(near_count, dtype=np.int64)
+    seen = np.empty((near_count, 3))
+    # What every receiver of one kind (far, or near when no far one catches anything)
+    # gives back so that the column delivers ``amount`` in all (see ``_conserve``).
+    give0 = give1 = give2 = 0.0
+    far_gives = True
     if near_count:
         for s in range(sub_lo, sub_hi):
+            m0 = m1 = m2 = 0.0
             for q in range(mean_ptr[s], mean_ptr[s + 1]):
-                for c in range(3):
-                    scratch[base + s, c] += mean_shares[q] * scratch[mean_receivers[q], c]
-        near = np.empty(near_count, dtype=np.int64)
+                share = mean_shares[q]
+                source = mean_receivers[q]
+                m0 += share * scratch[source, 0]
+                m1 += share * scratch[source, 1]
+                m2 += share * scratch[source, 2]
+            scratch[base + s, 0], scratch[base + s, 1], scratch[base + s, 2] = m0, m1, m2
         r = 0
         for g in range(near_count):  # both ascending
             while receivers[r] != near_receivers[g]:
                 r += 1
             near[g] = r
-        excess = np.zeros(3)
+        excess0 = excess1 = excess2 = 0.0
         for g in range(near_count):
             r = near[g]
             seen0 = seen1 = seen2 = 0.0
@@ -137,60 +174,100 @@ def shoot(
                 seen2 += w * scratch[source, 2]
             a = area[receivers[r]]
             f = factors[r]
-            received[r, 0] = f * seen0
-            received[r, 1] = f * seen1
-            received[r, 2] = f * seen2
-            for c in range(3):
-                excess[c] += a * (received[r, c] - f * amount[c])
-        is_near = np.zeros(count, dtype=np.bool_)
-        for g in range(near_count):
-            is_near[near[g]] = True
+            seen[g, 0], seen[g, 1], seen[g, 2] = f * seen0, f * seen1, f * seen2
+            excess0 += a * (seen[g, 0] - f * amount[0])
+            excess1 += a * (seen[g, 1] - f * amount[1])
+            excess2 += a * (seen[g, 2] - f * amount[2])
         caught = 0.0
+        g = 0
         for r in range(count):
-            if not is_near[r]:
+            if g < near_count and near[g] == r:
+                g += 1
+            else:
                 caught += area[receivers[r]] * factors[r]
-        target_near = not caught > 0.0
-        if target_near:
+        if not caught > 0.0:
+            far_gives = False
             caught = 0.0
             for g in range(near_count):
                 caught += area[receivers[near[g]]] * factors[near[g]]
         if caught > 0.0:
-            for r in range(count):
-                if is_near[r] == target_near:
-                    for c in range(3):
-                        received[r, c] -= factors[r] * (excess[c] / caught)
-        for i in range(n):
-            k = entry_receiver[entries[i]]
-            for c in range(3):
-                scratch[k, c] = 0.0
+            give0, give1, give2 = excess0 / caught, excess1 / caught, excess2 / caught
+            if not far_gives:
+                for g in range(near_count):
+                    f = factors[near[g]]
+                    seen[g, 0] -= f * give0
+                    seen[g, 1] -= f * give1
+                    seen[g, 2] -= f * give2
+        else:
+            far_gives = False
         for s in range(sub_lo, sub_hi):
-            for c in range(3):
-                scratch[base + s, c] = 0.0
+            scratch[base + s, 0] = scratch[base + s, 1] = scratch[base + s, 2] = 0.0
     else:
-        for i in range(n):
-            k = entry_receiver[entries[i]]
-            for c in range(3):
-                scratch[k, c] = 0.0
-    power = np.zeros(3)
-    reflected = np.zeros(3)
+        far_gives = False
+    for i in range(n):
+        k = entry_receiver[entries[i]]
+        scratch[k, 0] = scratch[k, 1] = scratch[k, 2] = 0.0
+    power0 = power1 = power2 = 0.0
+    reflected0 = reflected1 = reflected2 = 0.0
     capture = 0.0
-    bounce = np.empty(3)
+    amount0, amount1, amount2 = amount[0], amount[1], amount[2]
+    g = 0
+    # The patch being added to, held in registers while the entries stay on it (the
+    # same sums in the same order as adding to ``patch_radiosity`` entry by entry).
+    held = -1
+    held0 = held1 = held2 = 0.0
     for r in range(count):
         k = receivers[r]
         a = area[k]
-        capture += a * factors[r]
-        for c in range(3):
-            value = received[r, c]
-            irradiance[k, c] += value
-            bounce[c] = reflectance[k, c] * value
-            power[c] += a * value
-            reflected[c] += a * bounce[c]
+        f = factors[r]
+        capture += a * f
+        if g < near_count and near[g] == r:
+            v0, v1, v2 = seen[g, 0], seen[g, 1], seen[g, 2]
+            g += 1
+        elif far_gives:
+            v0 = f * amount0 - f * give0
+            v1 = f * amount1 - f * give1
+            v2 = f * amount2 - f * give2
+        else:
+            v0, v1, v2 = f * amount0, f * amount1, f * amount2
+        irradiance[k, 0] += v0
+        irradiance[k, 1] += v1
+        irradiance[k, 2] += v2
+        radiosity[k, 0] = emission[k, 0] + reflectance[k, 0] * irradiance[k, 0]
+        radiosity[k, 1] = emission[k, 1] + reflectance[k, 1] * irradiance[k, 1]
+        radiosity[k, 2] = emission[k, 2] + reflectance[k, 2] * irradiance[k, 2]
+        b0 = reflectance[k, 0] * v0
+        b1 = reflectance[k, 1] * v1
+        b2 = reflectance[k, 2] * v2
+        power0 += a * v0
+        power1 += a * v1
+        power2 += a * v2
+        reflected0 += a * b0
+        reflected1 += a * b1
+        reflected2 += a * b2
         for e in range(receiver_ptr[k], receiver_ptr[k + 1]):  # each (patch, c) in order
             w = entry_weight[e]
             p = entry_patch[e]
-            patch_radiosity[p, 0] += w * bounce[0]
-            patch_radiosity[p, 1] += w * bounce[1]
-            patch_radiosity[p, 2] += w * bounce[2]
+            if p != held:
+                if held >= 0:
+                    patch_radiosity[held, 0] = held0
+                    patch_radiosity[held, 1] = held1
+                    patch_radiosity[held, 2] = held2
+                held = p
+                held0, held1, held2 = (
+                    patch_radiosity[p, 0],
+                    patch_radiosity[p, 1],
+                    patch_radiosity[p, 2],
+                )
+            held0 += w * b0
+            held1 += w * b1
+            held2 += w * b2
+    if held >= 0:
+        patch_radiosity[held, 0] = held0
+        patch_radiosity[held, 1] = held1
+        patch_radiosity[held, 2] = held2
+    power = np.array([power0, power1, power2])
+    reflected = np.array([reflected0, reflected1, reflected2])
     return power, reflected, capture
 
 

@@ -58,11 +58,9 @@ _T = TypeVar("_T")
 ROW_FIX_LIMIT = 0.25
 #: Row sums of an occlusion-free scene within this of 1 count as closed (exact factors).
 EXACT_ROW_SUM = 1e-6
-#: Columns a worker may have computed or under way beyond the one the pass is taking, so
-#: that the pass's memory stays bounded while a checkpoint is written (a million-receiver
-#: column with its gather weights can take 60 MB). A slow column can still leave a core
-#: idle behind it; with two, the pass took the time it took unbounded (2026-12-02: 508.8
-#: against 506.8 s at a million receivers; the default render's pass within noise).
+#: Columns a worker may have computed or under way beyond the one the pass is taking: the
+#: pass's memory stays bounded while a checkpoint is written (a million-receiver column
+#: with its gather weights can take 60 MB), and the pass takes the time it took unbounded.
 AHEAD_PER_WORKER = 2
 
 
@@ -194,11 +192,17 @@ class FormFactorEngine:
     def column(self, patch: int) -> Column:
         """F(receiver <- patch) for every receiver that can see it (balanced, see
         :meth:`balance`, once that has run), in float64."""
-        col = self._raw_column(patch)
+        col = self.raw_column(patch)
+        rows, scale = self.column_scales(patch)
+        factors = col.factors * (rows[col.receivers] * scale) if rows is not None else col.factors
+        return Column(col.receivers, factors.astype(np.float64, copy=False), col.rays, col.gather)
+
+    def column_scales(self, patch: int) -> tuple[np.ndarray | None, float]:
+        """Balancing's (R,) row scales (None before :meth:`balance`) and the column scale
+        of ``patch``: :meth:`column` is ``raw * (rows[receivers] * scale)``."""
         if self._row_scale is None:
-            return Column(col.receivers, col.factors.astype(np.float64), col.rays, col.gather)
-        scale = self._row_scale[col.receivers] * self._col_scale[patch]
-        return Column(col.receivers, col.factors * scale, col.rays, col.gather)
+            return None, 1.0
+        return self._row_scale, float(self._col_scale[patch])
 
     @property
     def subarea_means(self) -> SubareaMeans:
@@ -212,7 +216,7 @@ class FormFactorEngine:
         where a spill file could not be written."""
         out = []
         for patch in sorted(self._summed):
-            gather = self._raw_column(patch).gather
+            gather = self.raw_column(patch).gather
             if not len(gather.receivers):
                 continue
             factors = gather.factors
@@ -221,7 +225,8 @@ class FormFactorEngine:
             out.append((patch, factors, gather))
         return out
 
-    def _raw_column(self, patch: int) -> Column:
+    def raw_column(self, patch: int) -> Column:
+        """F(receiver <- patch) before balancing (float32; see :meth:`column_scales`)."""
         known = self._known(patch)
         if known is not None:
             return known
@@ -242,7 +247,7 @@ class FormFactorEngine:
         spilled = self._spill.read_factors(patch)
         if spilled is not None:
             return spilled
-        col = self._raw_column(patch)  # computed again: its spill file failed
+        col = self.raw_column(patch)  # computed again: its spill file failed
         return col.receivers, col.factors
 
     def _store(self, patch: int, col: Column) -> Column:
@@ -278,16 +283,12 @@ class FormFactorEngine:
             return
         for patch in self._pass_order().tolist():
             if patch in self._cache or patch in self._spill:
-                yield column_parts(patch, self._raw_column(patch))
+                yield column_parts(patch, self.raw_column(patch))
 
     def restore_columns(self, packed: dict[str, np.ndarray]) -> int:
         """Cache the columns :meth:`pass_columns` packed (a resumed pass computes only the
-        others); their rays were cast by the earlier run and are not counted again.
-
-        Returns
-        -------
-        int, columns restored.
-        """
+        others) and return how many; their rays were cast by the earlier run and are not
+        counted again."""
         restored = unpack_columns(packed, self._index)
         for patch, col in restored:
             self._store(patch, col)

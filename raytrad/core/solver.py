@@ -45,7 +45,6 @@ from typing import Any
 import numpy as np
 
 from raytrad.core import compiled, patch_factors
-from raytrad.core.columns import Column
 from raytrad.core.formfactor import FormFactorEngine
 from raytrad.core.mesh import RadiosityMesh
 from raytrad.core.patch_factors import PatchFactors
@@ -150,19 +149,27 @@ def filled_capture(captured: np.ndarray, patch_area: np.ndarray) -> np.ndarray:
     """(P,) capture fractions, the area-weighted mean of the measured ones (1 before any
     shot) standing in for patches that have not shot yet."""
     known = np.isfinite(captured)
+    if known.all():  # the usual case once every patch has shot
+        return captured.copy()
     mean_capture = 1.0
-    if known.any():
-        mean_capture = float(np.average(captured[known], weights=patch_area[known]))
+    if known.any():  # np.average's arithmetic, without its checks (a solve calls this a shot)
+        weights = patch_area[known]
+        mean_capture = float((captured[known] * weights).sum() / weights.sum())
     return np.where(known, captured, mean_capture)
 
 
-def ambient_light(problem: DiscreteSystem, state: SolverState) -> np.ndarray:
+def ambient_light(
+    problem: DiscreteSystem, state: SolverState, unshot_power: np.ndarray | None = None
+) -> np.ndarray:
     """(3,) the ambient term of formula 3 [W m-2], with the measured capture fraction in
-    the amplification, never negative, times the damping gain."""
+    the amplification, never negative, times the damping gain. ``unshot_power`` is
+    ``patch_area @ state.unshot`` ((3,) [W]) when the caller has it."""
     area = problem.patch_area
     capture = filled_capture(state.captured, area)
     lost = area @ (1.0 - problem.patch_reflectance * capture[:, None])  # (3,)
-    ambient = (area @ state.unshot) / np.maximum(lost, 1e-300 * area.sum())  # formula 3
+    if unshot_power is None:
+        unshot_power = area @ state.unshot
+    ambient = unshot_power / np.maximum(lost, 1e-300 * area.sum())  # formula 3
     return np.asarray(np.maximum(ambient, 0.0) * state.ambient_gain)
 
 
@@ -175,8 +182,9 @@ def _ambient_amount(
     """
     unshot = state.unshot
     area = problem.patch_area
-    amount = unshot + problem.patch_reflectance * ambient_light(problem, state)[None, :]
-    cap = np.maximum(area @ unshot, 0.0)[None, :] / area[:, None]
+    power = area @ unshot
+    amount = unshot + problem.patch_reflectance * ambient_light(problem, state, power)[None, :]
+    cap = np.maximum(power, 0.0)[None, :] / area[:, None]
     return np.minimum(amount, cap)  # formulas 4 and 5
 
 
@@ -301,7 +309,8 @@ def solve(
     ----------
     mesh : RadiosityMesh
     engine : FormFactorEngine
-        Supplies the form-factor column of each shooting patch.
+        Supplies the form-factor column of each shooting patch: the raw column and its
+        balancing scales to the compiled shot, the balanced column to the numpy one.
     settings : SolveSettings
         Method and stopping rules.
     state : SolverState or None
@@ -338,11 +347,13 @@ def solve(
     rays_before = state.rays  # from a checkpoint; the engine counts this run's rays
     reason = "no-emission" if emitted_total <= 0 else ""
     residual = 0.0
-    state.spread, state.peak = problem.spread(state.irradiance, state.entry_shot, state.unshot)
+    state.radiosity = problem.receiver_radiosity(state.irradiance)
+    state.spread, state.peak = problem.spread(state.radiosity, state.entry_shot, state.unshot)
     emitters = np.flatnonzero((problem.average(everyone, problem.receiver_emission) > 0).any(1))
+    direct = False
     while not reason:
         residual = float((area @ state.unshot_magnitude).sum()) / emitted_total
-        direct = bool((state.shot[emitters] != 0).any(axis=1).all())
+        direct = direct or bool((state.shot[emitters] != 0).any(axis=1).all())
         reason = _stop_reason(state, settings, residual, time.perf_counter() - start, direct)
         if not reason and stop is not None and stop():
             reason = "interrupted"
@@ -352,17 +363,20 @@ def solve(
         chosen_by = np.abs(amount)
         if method.selected_by_raised:  # but never by more than the patch would shoot
             chosen_by = np.minimum(np.abs(_raised(problem, state)), chosen_by)
-        magnitude = area * (chosen_by + state.spread).sum(axis=1)
+        chosen_by += state.spread
+        # the channels' sum, as .sum(axis=1) adds them but without its overhead (a shot)
+        magnitude = area * (chosen_by[:, 0] + chosen_by[:, 1] + chosen_by[:, 2])
         patch = int(np.argmax(magnitude))
         if magnitude[patch] <= 0:
             reason = "converged"
             break
-        _shoot(problem, state, engine.column(patch), patch, amount[patch])
-        state.spread, state.peak = problem.spread(state.irradiance, state.entry_shot, state.unshot)
+        _shoot(problem, state, engine, patch, amount[patch])
+        state.spread, state.peak = problem.spread(state.radiosity, state.entry_shot, state.unshot)
         state.rays = rays_before + engine.rays_cast
         state.seconds = time.perf_counter() - start
-        _guard_growth(state, area, settings)
-        _check_divergence(state, area, emitted_total)
+        unshot_power = float((area @ np.abs(state.unshot)).sum())
+        _guard_growth(state, unshot_power, settings)
+        _check_divergence(state, unshot_power, emitted_total)
         if progress is not None:
             progress(state, residual)
     state.seconds = time.perf_counter() - start
@@ -399,15 +413,23 @@ def _stop_reason(
 
 
 def _shoot(
-    problem: DiscreteSystem, state: SolverState, column: Column, patch: int, amount: np.ndarray
+    problem: DiscreteSystem,
+    state: SolverState,
+    engine: FormFactorEngine,
+    patch: int,
+    amount: np.ndarray,
 ) -> None:
     """Shoot ``amount`` ((3,) [W m-2]) from ``patch`` through its form-factor column: one
-    compiled loop when available (:mod:`raytrad.core.compiled`), else :func:`numpy_shoot`,
-    the reference it is tested against."""
+    compiled loop when available (:mod:`raytrad.core.compiled`), which balances the raw
+    column as it goes, else :func:`numpy_shoot`, the reference it is tested against."""
+    if state.radiosity.shape != state.irradiance.shape:  # a state :func:`solve` did not set
+        state.radiosity = problem.receiver_radiosity(state.irradiance)
     fast = compiled.get()
     if fast is None:
-        numpy_shoot(problem, state, column, patch, amount)
+        numpy_shoot(problem, state, engine, patch, amount)
         return
+    column = engine.raw_column(patch)
+    row_scale, column_scale = engine.column_scales(patch)
     gather = column.gather
     means = problem.subarea_means
     power, reflected, capture = fast.shoot(
@@ -417,10 +439,13 @@ def _shoot(
         problem.receiver_emission,
         problem.receiver_reflectance,
         state.irradiance,
+        state.radiosity,
         state.entry_shot,
         np.ascontiguousarray(amount, dtype=np.float64),
         column.receivers,
         column.factors,
+        _UNSCALED if row_scale is None else row_scale,
+        column_scale,
         gather.receivers,
         gather.pointer,
         gather.sources,
@@ -445,10 +470,19 @@ def _shoot(
     state.shots += 1
 
 
+#: The compiled shot's row scales before balancing (none).
+_UNSCALED = np.zeros(0)
+
+
 def numpy_shoot(
-    problem: DiscreteSystem, state: SolverState, column: Column, patch: int, amount: np.ndarray
+    problem: DiscreteSystem,
+    state: SolverState,
+    engine: FormFactorEngine,
+    patch: int,
+    amount: np.ndarray,
 ) -> None:
-    """Shoot ``amount`` ((3,) [W m-2]) from ``patch`` through its form-factor column.
+    """Shoot ``amount`` ((3,) [W m-2]) from ``patch`` through its form-factor column
+    (``engine.column(patch)``).
 
     Each of the patch's receivers shoots its own unshot radiosity plus the patch's
     overshoot (``amount`` minus the patch's unshot radiosity), so that the patch mean is
@@ -457,13 +491,10 @@ def numpy_shoot(
     gather-weighted mean of the receivers' shots, and the far ones give back what that
     gained or lost against the mean (:func:`_conserve`).
     """
+    column = engine.column(patch)
     entries = problem.patch_entries[problem.patch_ptr[patch] : problem.patch_ptr[patch + 1]]
     sources = problem.entry_receiver[entries]
-    radiosity = (
-        problem.receiver_emission[sources]
-        + problem.receiver_reflectance[sources] * state.irradiance[sources]
-    )
-    own = radiosity - state.entry_shot[entries]
+    own = state.radiosity[sources] - state.entry_shot[entries]
     weight = problem.entry_weight[entries]
     overshoot = amount - weight @ own
     shots = own + overshoot[None, :]  # (n, 3), their W-mean is ``amount``
@@ -482,6 +513,9 @@ def numpy_shoot(
         problem.scratch[means.base + nodes] = 0.0
         _conserve(irradiance, f, amount, problem.receiver_area[j], near)
     state.irradiance[j] += irradiance
+    state.radiosity[j] = (
+        problem.receiver_emission[j] + problem.receiver_reflectance[j] * state.irradiance[j]
+    )
     reflected = problem.receiver_reflectance[j] * irradiance
     state.patch_radiosity += problem.average(j, reflected)
     area_p = problem.patch_area[patch]
@@ -538,13 +572,13 @@ def _conserve(
 DIVERGENCE_LIMIT = 1e9
 
 
-def _check_divergence(state: SolverState, area: np.ndarray, emitted_total: float) -> None:
+def _check_divergence(state: SolverState, total: float, emitted_total: float) -> None:
     """Raise when the unshot power has grown past any legitimate overshoot.
 
     That happens only when the discrete system has no finite solution: some closed set of
     surfaces returns more than it receives (reflectance times form-factor sum >= 1).
+    ``total`` is the unshot power ``sum_p A_p |dB_p|`` summed over channels [W].
     """
-    total = float((area @ np.abs(state.unshot)).sum())
     if not np.isfinite(total) or total > DIVERGENCE_LIMIT * emitted_total:
         raise SolverError(
             f"the solve diverged after {state.shots} shots: the unshot power grew to "
@@ -553,16 +587,16 @@ def _check_divergence(state: SolverState, area: np.ndarray, emitted_total: float
         )
 
 
-def _guard_growth(state: SolverState, area: np.ndarray, settings: SolveSettings) -> None:
+def _guard_growth(state: SolverState, total: float, settings: SolveSettings) -> None:
     """Halve the overshoot of a damped method when the unshot power grows well past its
     minimum.
 
     Shooting never increases the absolute unshot power unless it overshoots by more than the
     iteration tolerates (the omega >= 2 regime); growth is the sign of divergence.
+    ``total`` is the unshot power ``sum_p A_p |dB_p|`` summed over channels [W].
     """
     if not SHOOTING_METHODS[settings.method].damped:
         return
-    total = float((area @ np.abs(state.unshot)).sum())
     if total < state.min_unshot:
         state.min_unshot = total
     elif total > 4.0 * state.min_unshot and state.ambient_gain > 1e-3:

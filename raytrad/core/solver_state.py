@@ -45,6 +45,10 @@ class SolverState:
     peak : (P, 3) float64
         ``max_k |dB_pk|``, the largest unshot radiosity of the patch's entries: what a
         near receiver may see of it [W m-2]. Derived like ``spread``.
+    radiosity : (R, 3) float64
+        ``emission + reflectance * irradiance`` of each receiver [W m-2], kept with the
+        irradiance by each shot (so that ``spread`` reads one array, not three). Derived
+        like ``spread``.
     """
 
     irradiance: np.ndarray
@@ -62,6 +66,7 @@ class SolverState:
     entry_shot: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
     spread: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
     peak: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    radiosity: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
 
     @property
     def unshot(self) -> np.ndarray:

@@ -73,7 +73,7 @@ class DiscreteSystem:
         )
 
     def spread(
-        self, irradiance: np.ndarray, entry_shot: np.ndarray, unshot: np.ndarray
+        self, radiosity: np.ndarray, entry_shot: np.ndarray, unshot: np.ndarray
     ) -> tuple[np.ndarray, np.ndarray]:
         """How the receivers of each patch differ in what they still have to shoot.
 
@@ -82,8 +82,8 @@ class DiscreteSystem:
 
         Parameters
         ----------
-        irradiance : (R, 3) float64
-            Irradiance gathered so far [W m-2].
+        radiosity : (R, 3) float64
+            Radiosity of each receiver, ``emission + reflectance * irradiance`` [W m-2].
         entry_shot : (nnz, 3) float64
             Radiosity each (patch, receiver) entry has shot [W m-2].
         unshot : (P, 3) float64
@@ -96,14 +96,12 @@ class DiscreteSystem:
         """
         fast = compiled.get()
         if fast is None:
-            return self.numpy_spread(irradiance, entry_shot, unshot)
+            return self.numpy_spread(radiosity, entry_shot, unshot)
         spread, peak = fast.patch_spread(
             self.entry_receiver,
             self.entry_patch,
             self.entry_weight,
-            self.receiver_emission,
-            self.receiver_reflectance,
-            np.ascontiguousarray(irradiance),
+            np.ascontiguousarray(radiosity),
             np.ascontiguousarray(entry_shot),
             np.ascontiguousarray(unshot),
             len(self.patch_area),
@@ -111,11 +109,10 @@ class DiscreteSystem:
         return np.asarray(spread), np.asarray(peak)
 
     def numpy_spread(
-        self, irradiance: np.ndarray, entry_shot: np.ndarray, unshot: np.ndarray
+        self, radiosity: np.ndarray, entry_shot: np.ndarray, unshot: np.ndarray
     ) -> tuple[np.ndarray, np.ndarray]:
         """:meth:`spread` in numpy (the reference)."""
-        k = self.entry_receiver
-        own = self.receiver_emission[k] + self.receiver_reflectance[k] * irradiance[k] - entry_shot
+        own = radiosity[self.entry_receiver] - entry_shot
         deviation = self.entry_weight[:, None] * np.abs(own - unshot[self.entry_patch])
         count = len(self.patch_area)
         peak = np.zeros((count, 3))
@@ -125,6 +122,11 @@ class DiscreteSystem:
             axis=1,
         )
         return spread, peak
+
+    def receiver_radiosity(self, irradiance: np.ndarray) -> np.ndarray:
+        """(R, 3) ``emission + reflectance * irradiance`` of each receiver [W m-2] from its
+        (R, 3) irradiance [W m-2]."""
+        return np.asarray(self.receiver_emission + self.receiver_reflectance * irradiance)
 
     def average(self, receivers: np.ndarray, values: np.ndarray) -> np.ndarray:
         """``W[:, receivers] @ values``: patch means of per-receiver values ((K, 3) -> (P, 3)).

@@ -40,12 +40,12 @@ def test_compiled_average_and_spread_agree_with_numpy(system: DiscreteSystem) ->
         rtol=0,
         atol=1e-12,
     )
-    irradiance = rng.uniform(0, 2, (count, 3))
+    radiosity = system.receiver_radiosity(rng.uniform(0, 2, (count, 3)))
     entry_shot = rng.uniform(0, 1, (len(system.entry_patch), 3))
     unshot = rng.normal(size=(len(system.patch_area), 3))
     for got, want in zip(
-        system.spread(irradiance, entry_shot, unshot),
-        system.numpy_spread(irradiance, entry_shot, unshot),
+        system.spread(radiosity, entry_shot, unshot),
+        system.numpy_spread(radiosity, entry_shot, unshot),
         strict=True,
     ):
         np.testing.assert_allclose(got, want, rtol=1e-12, atol=1e-12)

@@ -770,6 +770,16 @@ class ScaledEngine:
         column = self.engine.column(patch)
         return Column(column.receivers, column.factors * self.factor, column.rays)
 
+    def raw_column(self, patch: int) -> Column:
+        column = self.engine.raw_column(patch)
+        return Column(column.receivers, column.factors, column.rays)
+
+    def column_scales(self, patch: int) -> tuple[np.ndarray, float]:
+        rows, scale = self.engine.column_scales(patch)
+        if rows is None:
+            rows = np.ones(self.engine.mesh.receiver_count)
+        return rows, scale * self.factor
+
 
 def short_factors_case(rho: float = 0.999, factor: float = 0.99) -> StressCase:
     effective = rho * factor
