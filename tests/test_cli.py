@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 
 from raytrad import api
+from raytrad.cli import _print_summary
 from raytrad.core.mesh import MeshSettings
 from raytrad.core.solver import SHOOTING_METHODS, SolveSettings
 from raytrad.formats.ply import read_radiosity_ply
@@ -304,7 +305,7 @@ def test_interrupted_render_resumes_to_the_same_answer(tmp_path: Path) -> None:
 
 
 def test_a_time_limited_refinement_resumes_without_pass_or_solve(
-    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
 ) -> None:
     """A time-limited run whose refinement is cut keeps a checkpoint of the converged
     solve with every column: ``--resume`` traces no pass, shoots no shot, refines to the
@@ -329,6 +330,11 @@ def test_a_time_limited_refinement_resumes_without_pass_or_solve(
     monkeypatch.setattr(adaptive, "_gather", original)
     assert first.result.stop_reason == "converged" and first.refinement.stopped
     assert first.outputs["checkpoint"].is_file()
+    # the round cut short added receivers it did not gather, and the summary says so
+    cut = first.report["refinement"]
+    assert cut["receivers_interpolated"] == cut["receivers_added"] > 0 and cut["rounds"] == 0
+    _print_summary(first.report, {})
+    assert f"{cut['receivers_interpolated']} of them interpolated" in capsys.readouterr().out
     second = api.render(scene, out, settings, resume=True)
     resumed = second.report["resumed"]
     assert resumed["form_factor_columns"] == first.prepared.mesh.patch_count
@@ -410,6 +416,7 @@ def test_time_limit_bounds_the_form_factor_pass(
     # refinement had no time left either, and the report and the summary say so
     assert report["refinement"]["stopped"] is True
     assert report["refinement"]["receivers_added"] == 0
+    assert report["refinement"]["receivers_interpolated"] == 0
     assert "refined    nothing: the time limit or an interrupt came first" in summary
     assert "form-factor pass stopped after" in caplog.text
     solve = report["solve"]

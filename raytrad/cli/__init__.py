@@ -111,6 +111,12 @@ def _share(part: int, whole: int) -> str:
     return f"{100.0 * part / whole:.0f}%" if whole else "-"
 
 
+def _naive(rays: int, naive: int) -> str:
+    """``rays`` against the naive count: seeing (receiver, patch) pairs x sample points
+    (more than 100 % where many pairs are near: near sub-areas are traced per triangle)."""
+    return f"{_share(rays, naive)} of a naive caster's {naive}"
+
+
 def _print_summary(report: dict[str, Any], outputs: dict[str, Path]) -> None:
     s, stats, t = report["solve"], report["statistics"], report["timings_seconds"]
     total = sum(t.values())
@@ -127,7 +133,7 @@ def _print_summary(report: dict[str, Any], outputs: dict[str, Path]) -> None:
             if not stats["occlusion_tested"]
             else "; every column came from the checkpoint"
             if report.get("resumed") and not s["rays_naive"]
-            else f"; {_share(s['rays'], s['rays_naive'])} of {s['rays_naive']} without culling"
+            else f"; {_naive(s['rays'], s['rays_naive'])}"
         )
         + ")",
         "time       " + ", ".join(f"{k} {v:.2f}s" for k, v in t.items()) + f"; total {total:.2f}s",
@@ -151,13 +157,14 @@ def _print_summary(report: dict[str, Any], outputs: dict[str, Path]) -> None:
         )
     refinement = report.get("refinement") or {}
     cut = "; stopped early by the time limit or an interrupt" if refinement.get("stopped") else ""
+    if refinement.get("receivers_interpolated"):
+        cut += f"; {refinement['receivers_interpolated']} of them interpolated: a round cut short"
     if refinement.get("receivers_added"):
         lines.append(
             f"refined    +{refinement['receivers_added']} receivers in "
             f"{refinement['rounds']} rounds (solved {refinement['receivers_solved']}; "
             f"{refinement['rays']} rays, "
-            f"{_share(refinement['rays'], refinement['rays_naive'])} of "
-            f"{refinement['rays_naive']} without culling{cut})"
+            f"{_naive(refinement['rays'], refinement['rays_naive'])}{cut})"
         )
     elif cut:
         lines.append("refined    nothing: the time limit or an interrupt came first")

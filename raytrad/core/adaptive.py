@@ -108,7 +108,10 @@ class Refinement:
     added : int
         Receivers added.
     rounds : int
-        Rounds that added receivers.
+        Rounds that added receivers and gathered them.
+    interpolated : int
+        Of ``added``, the receivers of a round cut short before its gather finished: they
+        keep the interpolation of the mesh before it (0 unless ``stopped``).
     by_object : dict of str to int
         Receivers added per scene object.
     change_rms : (3,) float64
@@ -128,6 +131,7 @@ class Refinement:
     radiosity: np.ndarray
     added: int = 0
     rounds: int = 0
+    interpolated: int = 0
     by_object: dict[str, int] = field(default_factory=dict)
     change_rms: np.ndarray = field(default_factory=lambda: np.zeros(3))
     rays: int = 0
@@ -262,6 +266,7 @@ def _keep_interpolated(
     out.radiosity = np.concatenate([out.radiosity, before])
     out.mesh = refined
     out.added += len(new)
+    out.interpolated = len(new)
     out.stopped = True
     log.warning(
         "refinement stopped in round %d (time limit spent or interrupted): its %d new "

@@ -126,6 +126,7 @@ def add_total_error(
         "receivers_solved": solved_receivers,
         "receivers_added": refinement.added,
         "rounds": refinement.rounds,
+        "receivers_interpolated": refinement.interpolated,
         "by_object": refinement.by_object,
         "change_rms": refinement.change_rms.tolist(),
         "rays": refinement.rays,

@@ -164,6 +164,7 @@ def test_a_stop_within_a_round_keeps_the_look_of_the_round_before(
         stop=lambda: next(polls) >= 40,  # the first poll is before the round
     )
     assert out.stopped and out.rounds == 0 and out.added > 0
+    assert out.interpolated == out.added == out.mesh.receiver_count - prepared.mesh.receiver_count
     assert 40 < next(polls) < prepared.mesh.patch_count  # polled patch by patch
     old = prepared.mesh.receiver_count
     # the centres of the new triangles (a new corner, every corner seen) as each mesh shows
