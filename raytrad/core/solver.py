@@ -384,7 +384,7 @@ def solve(
     residual = (
         float((area @ state.unshot_magnitude).sum()) / emitted_total if emitted_total else 0.0
     )
-    radiosity = problem.receiver_emission + problem.receiver_reflectance * state.irradiance
+    radiosity = problem.receiver_radiosity(state.irradiance)
     if not np.isfinite(radiosity).all():
         raise SolverError("the solve produced non-finite radiosity")
     return SolveResult(
@@ -513,9 +513,7 @@ def numpy_shoot(
         problem.scratch[means.base + nodes] = 0.0
         _conserve(irradiance, f, amount, problem.receiver_area[j], near)
     state.irradiance[j] += irradiance
-    state.radiosity[j] = (
-        problem.receiver_emission[j] + problem.receiver_reflectance[j] * state.irradiance[j]
-    )
+    state.radiosity[j] = problem.receiver_radiosity(state.irradiance[j], j)
     reflected = problem.receiver_reflectance[j] * irradiance
     state.patch_radiosity += problem.average(j, reflected)
     area_p = problem.patch_area[patch]

@@ -123,10 +123,16 @@ class DiscreteSystem:
         )
         return spread, peak
 
-    def receiver_radiosity(self, irradiance: np.ndarray) -> np.ndarray:
-        """(R, 3) ``emission + reflectance * irradiance`` of each receiver [W m-2] from its
-        (R, 3) irradiance [W m-2]."""
-        return np.asarray(self.receiver_emission + self.receiver_reflectance * irradiance)
+    def receiver_radiosity(
+        self, irradiance: np.ndarray, receivers: np.ndarray | None = None
+    ) -> np.ndarray:
+        """(K, 3) ``emission + reflectance * irradiance`` [W m-2] of the (K,) ``receivers``
+        (every one when None) from their (K, 3) irradiance [W m-2]."""
+        if receivers is None:
+            return np.asarray(self.receiver_emission + self.receiver_reflectance * irradiance)
+        return np.asarray(
+            self.receiver_emission[receivers] + self.receiver_reflectance[receivers] * irradiance
+        )
 
     def average(self, receivers: np.ndarray, values: np.ndarray) -> np.ndarray:
         """``W[:, receivers] @ values``: patch means of per-receiver values ((K, 3) -> (P, 3)).
