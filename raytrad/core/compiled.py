@@ -9,8 +9,9 @@ processes load it from disk) and run without the GIL (``nogil=True``), so the
 form-factor engine's threads run on every core.
 
 :mod:`raytrad.core.kernels`, :mod:`raytrad.core.contour`, :mod:`raytrad.core.gather`,
-:mod:`raytrad.core.spread`, :mod:`raytrad.core.clusters` and :mod:`raytrad.core.pairs`
-keep the numpy implementations as the reference: every function here computes the same
+:mod:`raytrad.core.spread`, :mod:`raytrad.core.clusters`, :mod:`raytrad.core.pairs` and
+:mod:`raytrad.core.segment_search` keep the numpy implementations as the reference: every
+function here computes the same
 formula in the same order, and the tests compare the two to 1e-12 on random and
 adversarial pairs (grazing, coplanar, straddling the horizon).
 numba is imported only when a kernel is first asked for (:func:`get`), and
@@ -82,6 +83,7 @@ def _dispatchers(numba: Any) -> dict[str, Any]:
         _compiled_gather,
         _compiled_kernels,
         _compiled_near,
+        _compiled_segments,
         _compiled_shafts,
         _compiled_solver,
     )
@@ -93,6 +95,7 @@ def _dispatchers(numba: Any) -> dict[str, Any]:
         _compiled_gather,
         _compiled_shafts,
         _compiled_solver,
+        _compiled_segments,
     )
     for loops in modules:
         for name in loops.KERNELS:

@@ -271,31 +271,24 @@ def test_the_floor_at_the_cornell_blocks_feet_agrees_with_a_gather(
     np.testing.assert_allclose(ratios, 1.0, atol=0.04)
 
 
-@pytest.mark.parametrize("seed", [0, 1, 2])
-def test_candidate_pairs_are_the_items_within_reach(seed: int) -> None:
-    """Every (item, segment) pair whose point lies within the item's reach of the
-    segment, and no other, whatever the spread of reaches (a few long wall edges among
-    many short ones): measured pair by pair."""
-    from raytrad.core.imprint import _candidate_pairs
+def test_an_edge_shorter_than_the_gap_is_snapped_to_an_outline_above_it() -> None:
+    """An outline segment may lie up to ``gap`` off a surface and still be imprinted on
+    it, so the edges it crosses are searched within half their length and the gap of it.
+    A 4 mm edge under a segment 9 mm up (gap 10 mm) was missed while the search reached
+    only an edge's length (its midpoint is 9 mm from the segment)."""
+    from raytrad.core.imprint import Outlines, _crossing_snaps
 
-    rng = np.random.default_rng(seed)
-    points = rng.uniform(0.0, 4.0, (3000, 3))
-    reach = np.exp(rng.uniform(np.log(1e-3), np.log(0.5), len(points)))
-    start = rng.uniform(0.0, 4.0, (60, 3))
-    segments = np.stack([start, start + rng.normal(0.0, 0.3, (60, 3))], axis=1)
-    segments[:5, 1] = segments[:5, 0]  # points, as the outlines' ends are passed
-    p, d = segments[:, 0], segments[:, 1] - segments[:, 0]
-    square = np.maximum((d * d).sum(axis=1), 1e-300)
-    rel = points[:, None, :] - p[None]  # (N, S, 3)
-    t = np.clip((rel * d[None]).sum(axis=2) / square[None], 0.0, 1.0)
-    distance = np.linalg.norm(rel - t[..., None] * d[None], axis=2)
-    item, segment = np.nonzero(distance <= reach[:, None])
-    got_item, got_segment = _candidate_pairs(points, segments, reach)
-    np.testing.assert_array_equal(got_item, item)
-    np.testing.assert_array_equal(got_segment, segment)
-    one_item, one_segment = _candidate_pairs(points, segments, 0.2)
-    expected = np.nonzero(distance <= 0.2)
-    np.testing.assert_array_equal(one_item, expected[0])
-    np.testing.assert_array_equal(one_segment, expected[1])
-    far_item, far_segment = _candidate_pairs(points, segments + 100.0, reach)
-    assert len(far_item) == 0 and len(far_segment) == 0  # none near: none, not an error
+    edge = 0.004
+    positions = np.array([[0.0, 0.0, 0.0], [edge, 0.0, 0.0], [0.0, edge, 0.0]])
+    triangles = np.array([[0, 1, 2]])
+    height = 0.009
+    outline = Outlines(
+        points=np.array([[[0.5 * edge, -0.5, height], [0.5 * edge, 0.5, height]]]),
+        surface=np.array([1]),
+        normal=np.array([[1.0, 0.0, 0.0]]),
+    )
+    vertex, target = _crossing_snaps(positions, triangles, np.array([0]), outline, 0.01)
+    crosses = [sorted(row[:2]) for row in vertex.tolist()]
+    assert [0, 1] in crosses  # the edge along x, which the segment crosses at its middle
+    row = crosses.index([0, 1])
+    np.testing.assert_allclose(target[row, 2], [0.5 * edge, 0.0, 0.0], atol=1e-12)
