@@ -334,7 +334,9 @@ def test_a_time_limited_refinement_resumes_without_pass_or_solve(
     cut = first.report["refinement"]
     assert cut["receivers_interpolated"] == cut["receivers_added"] > 0 and cut["rounds"] == 0
     _print_summary(first.report, {})
-    assert f"{cut['receivers_interpolated']} of them interpolated" in capsys.readouterr().out
+    summary = capsys.readouterr().out
+    assert f"{cut['receivers_interpolated']} of them interpolated" in summary
+    assert f"+{cut['receivers_added']} receivers in 0 rounds and one cut short" in summary
     second = api.render(scene, out, settings, resume=True)
     resumed = second.report["resumed"]
     assert resumed["form_factor_columns"] == first.prepared.mesh.patch_count
@@ -485,3 +487,32 @@ def test_sigterm_stops_cleanly_with_a_checkpoint_and_resumes(tmp_path: Path) -> 
     assert resumed.returncode == 0, resumed.stderr
     _, _, radiosity = read_radiosity_ply(out / "cornell.ply")
     np.testing.assert_array_equal(radiosity, straight.result.radiosity.astype(np.float32))
+
+
+def test_the_summary_counts_one_refinement_round_in_the_singular(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    """'+N receivers in 1 round', not '1 rounds' (a newcomer's report)."""
+    report = {
+        "scene": "box.obj",
+        "statistics": {"receivers": 10, "patches": 2, "subareas": 4, "occlusion_tested": True},
+        "solve": {
+            "method": "ambient",
+            "stop_reason": "converged",
+            "shots": 3,
+            "residual": 1e-4,
+            "rays": 100,
+            "rays_naive": 200,
+            "rays_per_second": 1e6,
+        },
+        "timings_seconds": {"solve": 0.1},
+        "refinement": {
+            "receivers_added": 5,
+            "rounds": 1,
+            "receivers_solved": 5,
+            "rays": 50,
+            "rays_naive": 80,
+        },
+    }
+    _print_summary(report, {})
+    assert "+5 receivers in 1 round (solved 5;" in capsys.readouterr().out

@@ -157,12 +157,14 @@ def _print_summary(report: dict[str, Any], outputs: dict[str, Path]) -> None:
         )
     refinement = report.get("refinement") or {}
     cut = "; stopped early by the time limit or an interrupt" if refinement.get("stopped") else ""
+    rounds = f"{refinement.get('rounds', 0)} round" + ("" if refinement.get("rounds") == 1 else "s")
     if refinement.get("receivers_interpolated"):
+        rounds += " and one cut short"
         cut += f"; {refinement['receivers_interpolated']} of them interpolated: a round cut short"
     if refinement.get("receivers_added"):
         lines.append(
             f"refined    +{refinement['receivers_added']} receivers in "
-            f"{refinement['rounds']} rounds (solved {refinement['receivers_solved']}; "
+            f"{rounds} (solved {refinement['receivers_solved']}; "
             f"{refinement['rays']} rays, "
             f"{_naive(refinement['rays'], refinement['rays_naive'])}{cut})"
         )
