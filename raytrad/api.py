@@ -29,18 +29,14 @@ from raytrad.core.solver import solve as solve_system
 from raytrad.errors import RaytradError, SettingsError
 from raytrad.formats.ply import read_radiosity_ply
 from raytrad.outputs import resume as resuming
+from raytrad.outputs import run_manifest
 from raytrad.outputs.comparison import markdown_table, write_comparison
 from raytrad.outputs.plot import plot_convergence
 from raytrad.outputs.progress import RenderProgress, pass_hook, shot_hook
 from raytrad.outputs.report import add_error_log, add_total_error, build_report, write_report
 from raytrad.outputs.resume import checkpoint_path, fingerprint, resume_point, save_state
 from raytrad.outputs.run_lock import RunLock
-from raytrad.outputs.run_manifest import (
-    complete_set_key,
-    content_key,
-    verify_outputs,
-    write_manifest,
-)
+from raytrad.outputs.run_manifest import verify_outputs
 from raytrad.outputs.write import check_output_range, write_outputs
 from raytrad.products.framing import file_camera
 from raytrad.products.lightmap import choose_lightmap_uvs
@@ -133,7 +129,7 @@ def write(
     with RunLock(output_dir):
         outputs, _ = write_outputs(prepared, result, output_dir, stem, settings)
         stopped = {"solve": {"stop_reason": result.stop_reason}}
-        outputs["manifest"] = write_manifest(output_dir, outputs, stopped)
+        outputs["manifest"] = run_manifest.write_manifest(output_dir, outputs, stopped)
     return outputs
 
 
@@ -248,12 +244,13 @@ def render(
         key = fingerprint(loaded.scene, settings.system_settings())
         checkpoint = checkpoint_path(output_dir, scene_path.stem)
         strict = resume is True
-        state, columns = resume_point(checkpoint, key, strict) if resume else (None, None)
+        state, columns, history = resume_point(checkpoint, key, strict) if resume else (None,) * 3
         taken = resuming.resume_facts(state, columns)  # before the solve moves ``state`` on
+        logs: list[ErrorLog] = []  # the solve's error log, saved with its state
 
         def save(state: SolverState, engine: Any = None, whole: bool = False) -> None:
             parts = (engine or prepared.engine).pass_column_parts(whole)  # a pass's columns
-            save_state(checkpoint, state, key, parts, whole)
+            save_state(checkpoint, state, key, parts, whole, logs[0] if logs else None)
 
         on_column = pass_hook(save, settings.checkpoint_seconds)  # a long pass is saved too
         prepared = prepare(loaded.scene, settings, budget, columns, on_column)
@@ -264,7 +261,8 @@ def render(
             if reference is not None:
                 with timed(timings, "reference"):
                     ref = make_reference(reference, prepared)
-            monitor = ConvergenceMonitor(prepared.mesh, prepared.engine, ref)
+            monitor = ConvergenceMonitor(prepared.mesh, prepared.engine, ref, history)
+            logs.append(monitor.log)
             on_shot = shot_hook(monitor, progress, settings, save)
             with timed(timings, "solve"):
                 resumed = state.seconds if state else 0
@@ -299,8 +297,10 @@ def render(
             add_total_error(report, error_log, error, refinement, solved.mesh.receiver_count)
             outputs["report"] = output_dir / "report.json"
             write_report(outputs["report"], report)
-            made_from = content_key(loaded, settings)
-            outputs["manifest"] = write_manifest(output_dir, outputs, report, made_from)  # last
+            made_from = run_manifest.content_key(loaded, settings)
+            outputs["manifest"] = run_manifest.write_manifest(
+                output_dir, outputs, report, made_from
+            )  # last
         finally:
             prepared.close()
     return RenderOutcome(result, baked, outputs, report, error_log, refinement, error)
@@ -321,11 +321,11 @@ def outputs_current(
     SceneError
         The scene cannot be read (so a broken scene fails even beside old outputs).
     """
-    if (key := complete_set_key(output_dir)) is None:
+    if (key := run_manifest.complete_set_key(output_dir)) is None:
         return False
     loaded = load(scene_path, settings)
     resolved = with_scene_defaults(settings or RenderSettings(), loaded.output)
-    return key == content_key(loaded, resolved)
+    return key == run_manifest.content_key(loaded, resolved)
 
 
 def compare(

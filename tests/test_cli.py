@@ -300,6 +300,12 @@ def test_interrupted_render_resumes_to_the_same_answer(tmp_path: Path) -> None:
     assert 0 < resumed["solve_seconds"] <= first.result.state.seconds
     np.testing.assert_allclose(second.result.radiosity, straight.result.radiosity, rtol=1e-9)
     assert not checkpoint.exists()
+    # the report's error log covers the whole solve, the shots before the resume too
+    for name in ("shots", "residual", "estimate", "bound_rms"):  # null: not finite yet
+        got, want = (
+            np.array(r["convergence"][name], float) for r in (second.report, straight.report)
+        )
+        np.testing.assert_allclose(got, want, rtol=1e-9)
     _, _, written = read_radiosity_ply(out / "cornell.ply")
     np.testing.assert_array_equal(written, straight.result.radiosity.astype(np.float32))
 

@@ -196,6 +196,27 @@ class ErrorLog:
         """JSON-ready columns (inf becomes null)."""
         return {name: _jsonable(getattr(self, name)) for name in self.__dataclass_fields__}
 
+    @classmethod
+    def from_dict(cls, columns: dict[str, Any]) -> ErrorLog:
+        """The log :meth:`as_dict` gave (null back to inf).
+
+        Raises
+        ------
+        ValueError
+            ``columns`` are not a log's: a column missing, or of another length (the
+            true-error columns may be empty).
+        """
+        names = list(cls.__dataclass_fields__)
+        if not isinstance(columns, dict) or sorted(columns) != sorted(names):
+            raise ValueError("not an error log")
+        rows = len(columns["shots"])
+        for name in names:
+            if len(columns[name]) != rows and not (name.startswith("true_") and not columns[name]):
+                raise ValueError(
+                    f"error log column {name} has {len(columns[name])} rows, not {rows}"
+                )
+        return cls(**{name: _restored(columns[name]) for name in names})
+
     def first_below(self, threshold: float, column: str = "true_rms") -> tuple[float, int] | None:
         """(seconds, shots) at the first log point whose worst channel is below threshold."""
         for seconds, shots, values in zip(
@@ -204,6 +225,11 @@ class ErrorLog:
             if max(values) < threshold:
                 return seconds, shots
         return None
+
+
+def _restored(values: list[Any]) -> list[Any]:
+    """:func:`_jsonable`'s values back: null to inf."""
+    return [_restored(v) if isinstance(v, list) else math.inf if v is None else v for v in values]
 
 
 def _jsonable(values: list[Any]) -> list[Any]:
@@ -230,16 +256,28 @@ class ConvergenceMonitor:
     engine : FormFactorEngine
         Supplies the largest form-factor row sum seen so far.
     reference : Reference or None
+    history : ErrorLog or None
+        The log of the solve this one resumes (saved with its checkpoint): the new rows
+        follow it, so the log covers the whole solve. Passed over when it has true-error
+        columns and there is no reference, or the other way round.
     """
 
     def __init__(
-        self, mesh: RadiosityMesh, engine: FormFactorEngine, reference: Reference | None = None
+        self,
+        mesh: RadiosityMesh,
+        engine: FormFactorEngine,
+        reference: Reference | None = None,
+        history: ErrorLog | None = None,
     ) -> None:
         self.mesh = mesh
         self.engine = engine
         self.reference = reference
         self.log = ErrorLog()
         self._next = 0
+        if history is not None and history.shots:
+            if bool(history.true_rms) == (reference is not None):
+                self.log = history
+                self._next = _next_row(history.shots[-1])
         self._max_reflectance = mesh.receiver_reflectance.max(axis=0)
         #: the receivers the error is taken over, and their area, reflectance and emission
         self._counted = np.flatnonzero(counted_receivers(mesh))
@@ -253,7 +291,7 @@ class ConvergenceMonitor:
     def __call__(self, state: SolverState, residual: float = math.nan) -> None:
         if state.shots >= self._next:
             self.record(state)
-            self._next = state.shots + 1 if state.shots < 20 else int(state.shots * LOG_SPACING) + 1
+            self._next = _next_row(state.shots)
 
     def record(self, state: SolverState) -> None:
         """Add one row for the current state."""
@@ -306,6 +344,12 @@ class ConvergenceMonitor:
         if not self.log.shots or self.log.shots[-1] != state.shots:
             self.record(state)
         return self.log
+
+
+def _next_row(shots: int) -> int:
+    """The shot count of the log row after one at ``shots`` (every shot up to 20, then
+    :data:`LOG_SPACING` apart)."""
+    return shots + 1 if shots < 20 else int(shots * LOG_SPACING) + 1
 
 
 def eta_seconds(seconds: list[float], residuals: list[float], target: float) -> float:

@@ -17,6 +17,7 @@ from typing import Any
 
 import numpy as np
 
+from raytrad.core.convergence import ErrorLog
 from raytrad.core.solver import SolverState
 from raytrad.errors import RaytradError
 from raytrad.formats.checkpoint import Spool, read_checkpoint, write_checkpoint
@@ -50,6 +51,7 @@ def save_state(
     key: dict[str, Any],
     columns: dict[str, np.ndarray] | Iterable[dict[str, np.ndarray]] | None = None,
     whole_pass: bool = False,
+    history: ErrorLog | None = None,
 ) -> None:
     """Write ``state``, its fingerprint ``key`` and the ``columns`` of a form-factor pass
     (cut short, or whole under a solve cut short) to ``path`` atomically: packed
@@ -57,10 +59,13 @@ def save_state(
     (:meth:`~raytrad.core.formfactor.FormFactorEngine.pass_column_parts`), gathered on
     disk first (:class:`~raytrad.formats.checkpoint.Spool`) so that no more than a
     column is held at once. ``whole_pass``: the columns are every column of a finished
-    pass, and ``state`` was shot through them (:func:`resume_point` keeps both)."""
+    pass, and ``state`` was shot through them (:func:`resume_point` keeps both).
+    ``history``: the solve's error log so far, which the resumed run's report goes on."""
     state_arrays, scalars = state.to_record()
     arrays: dict[str, Any] = dict(state_arrays)
     record = {"fingerprint": key, "scalars": scalars, "whole_pass": whole_pass}
+    if history is not None:
+        record["history"] = history.as_dict()
     if columns is None or isinstance(columns, dict):
         arrays |= {PASS + name: values for name, values in (columns or {}).items()}
         write_checkpoint(path, arrays, record)
@@ -74,9 +79,10 @@ def save_state(
 
 def resume_point(
     path: Path, key: dict[str, Any], strict: bool = True
-) -> tuple[SolverState | None, dict[str, np.ndarray] | None]:
-    """What ``--resume`` continues from: the saved solver state and the columns of a
-    form-factor pass cut short ((None, None) without a checkpoint).
+) -> tuple[SolverState | None, dict[str, np.ndarray] | None, ErrorLog | None]:
+    """What ``--resume`` continues from: the saved solver state, the columns of a
+    form-factor pass cut short and the error log of the solve so far ((None, None, None)
+    without a checkpoint; the log None when the checkpoint has none, or an unreadable one).
 
     With ``strict`` False (batch jobs), a checkpoint that does not match or cannot be read
     is passed over with a warning, and the run starts afresh.
@@ -95,7 +101,7 @@ def resume_point(
     if not Path(path).exists():
         say = log.warning if strict else log.info  # batch jobs resume whenever they can
         say("%s: no checkpoint to resume from; starting afresh", path)
-        return None, None
+        return None, None, None
     try:
         arrays, record = read_checkpoint(path)  # once: with a whole pass, hundreds of MB
         state = _saved_state(path, arrays, record, key)
@@ -104,12 +110,23 @@ def resume_point(
         if strict:
             raise
         log.warning("%s; starting afresh", exc)
-        return None, None
+        return None, None, None
     if columns and not whole:
         log.info("resuming the form-factor pass from %s: %d columns", path, len(columns["patch"]))
-        return None, columns
+        return None, columns, None
     log.info("resuming from %s at shot %d", path, state.shots)
-    return state, columns or None
+    return state, columns or None, _history(path, record)
+
+
+def _history(path: str | os.PathLike[str], record: dict[str, Any]) -> ErrorLog | None:
+    """The error log saved in a checkpoint's ``record`` (None: none, or unreadable)."""
+    if record.get("history") is None:
+        return None
+    try:
+        return ErrorLog.from_dict(record["history"])
+    except (ValueError, TypeError, KeyError) as exc:
+        log.warning("%s: its error log cannot be read (%s): the report's starts anew", path, exc)
+        return None
 
 
 def load_pass_columns(path: str | os.PathLike[str]) -> dict[str, np.ndarray]:

@@ -167,8 +167,10 @@ def test_columns_of_a_cut_pass_round_trip(tmp_path: Path) -> None:
     for name, values in packed.items():
         assert columns[name].dtype == values.dtype, name
         np.testing.assert_array_equal(columns[name], values)
-    state, resumed = resume_point(path, key)
-    assert state is None and resumed is not None  # shots through unbalanced factors: redone
+    state, resumed, history = resume_point(path, key)
+    assert (
+        state is None and resumed is not None and history is None
+    )  # shots through unbalanced factors: redone
     with prepare(cornell_box(), SETTINGS.mesh, stop=lambda: True, columns=columns) as again:
         # stopped at once: the 5 restored columns, none traced again
         assert again.engine.columns_computed == len(saved) and again.engine.rays_cast == 0
@@ -210,3 +212,33 @@ def test_checkpoint_of_the_layout_before_the_cluster_trees_is_refused(tmp_path: 
     save_state(tmp_path / "old.npz", _state(3), old)
     with pytest.raises(RaytradError, match="layout changed"):
         load_state(tmp_path / "old.npz", key)
+
+
+def test_the_error_log_round_trips_with_the_state(tmp_path: Path) -> None:
+    """The solve's error log goes into the checkpoint with its state and comes back as it
+    was, infinite estimates included (JSON null); a damaged log is passed over with a
+    warning, the state still resumed."""
+    from raytrad.core.convergence import ErrorLog
+    from raytrad.outputs.resume import resume_point
+
+    key = fingerprint(furnace_box(), SETTINGS.system_settings())
+    history = ErrorLog(
+        seconds=[0.0, 0.5],
+        shots=[0, 11],
+        rays=[0, 1234],
+        residual=[1.0, 0.25],
+        estimate=[[np.inf] * 3, [0.5, 0.25, 0.125]],
+        bound_rms=[[np.inf] * 3, [1.0, 0.5, 0.25]],
+        bound_max=[[np.inf] * 3, [2.0, 1.0, 0.5]],
+    )
+    path = tmp_path / "a.npz"
+    save_state(path, _state(1), key, history=history)
+    state, columns, back = resume_point(path, key)
+    assert state is not None and state.shots == 11 and columns is None
+    assert back == history
+    save_state(path, _state(1), key)  # a checkpoint without a log
+    assert resume_point(path, key)[2] is None
+    broken = ErrorLog(**{**history.__dict__, "residual": [1.0]})  # a column short
+    save_state(path, _state(1), key, history=broken)
+    state, _, back = resume_point(path, key)
+    assert state is not None and back is None
