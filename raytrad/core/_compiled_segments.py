@@ -38,22 +38,20 @@ def _slot(key, shift):
 
 
 def _near_cells(cells, shift):
-    """A set (open-addressing table of keys; ``used`` marks the slots) of the keys of every
-    cell within one of ``cells`` (M, 3): a sample whose own cell is not in it has no item
-    in its 27 cells, and is passed over with one probe instead of 27."""
-    mask = (1 << (64 - int(shift))) - 1
-    table = np.zeros(mask + 1, dtype=np.uint64)
-    used = np.zeros(mask + 1, dtype=np.bool_)
+    """A bit (one hash, a Bloom filter's) for the key of every cell within one of
+    ``cells`` (M, 3), in ``2**(64 - shift)`` bits: a sample whose own cell's bit is clear
+    has no item in its 27 cells, and is passed over with one test instead of 27 probes; a
+    set bit may be another cell's, which the probes then find empty. A bit an entry keeps
+    it small: 16 bytes an item at a fill of at most 27 in 128."""
+    words = np.zeros(((1 << (64 - int(shift))) + 63) // 64, dtype=np.uint64)
     for a in range(len(cells)):
         for o in range(27):  # one loop, not three: numba compiles it in a fraction
             key = _key(
                 cells[a, 0] + o // 9 - 1, cells[a, 1] + o // 3 % 3 - 1, cells[a, 2] + o % 3 - 1
             )
             h = _slot(key, shift)
-            while used[h] and table[h] != key:
-                h = (h + 1) & mask
-            table[h], used[h] = key, True
-    return table, used
+            words[h >> 6] |= np.uint64(1) << np.uint64(h & 63)
+    return words
 
 
 def segment_candidates(points, reach, samples, owner, segments, origin, cell, keys, by_key, cells):
@@ -87,12 +85,11 @@ def segment_candidates(points, reach, samples, owner, segments, origin, cell, ke
             h = (h + 1) & mask
         table_key[h], table_start[h], table_stop[h] = keys[slot], slot, stop
         slot = stop
-    near_bits = 4
-    while (1 << near_bits) < 54 * m:
+    near_bits = 6
+    while (1 << near_bits) < 128 * m:
         near_bits += 1
     near_shift = np.uint64(64 - near_bits)
-    near_mask = (1 << near_bits) - 1
-    near_table, near_used = _near_cells(cells, near_shift)
+    near = _near_cells(cells, near_shift)
     size = max(16, 4 * m)
     out_item = np.empty(size, dtype=np.int64)
     out_segment = np.empty(size, dtype=np.int64)
@@ -112,9 +109,7 @@ def segment_candidates(points, reach, samples, owner, segments, origin, cell, ke
         last_j, last_x, last_y, last_z = j, cx, cy, cz
         key = _key(cx, cy, cz)
         h = _slot(key, near_shift)
-        while near_used[h] and near_table[h] != key:
-            h = (h + 1) & near_mask
-        if not near_used[h]:
+        if not (near[h >> 6] >> np.uint64(h & 63)) & np.uint64(1):
             continue  # no item within a cell of this one
         for o in range(27):  # the 27 cells around the sample, in one loop
             key = _key(cx + o // 9 - 1, cy + o // 3 % 3 - 1, cz + o % 3 - 1)
