@@ -26,6 +26,7 @@ from raytrad.core.pipeline import Prepared, RunBudget, timed
 from raytrad.core.reference import automatic_reference, named_reference, reference_at_receivers
 from raytrad.core.solver import SHOOTING_METHODS, SolveResult, SolverState
 from raytrad.core.solver import solve as solve_system
+from raytrad.core.stages import reporting as stage_progress  # noqa: F401 (for the CLI)
 from raytrad.errors import RaytradError, SettingsError
 from raytrad.formats.ply import read_radiosity_ply
 from raytrad.outputs import resume as resuming
@@ -69,11 +70,9 @@ class RenderOutcome:
 
 
 def load(path: str | os.PathLike[str], settings: RenderSettings | None = None) -> SceneFile:
-    """Read a scene file with what ``settings`` needs of it (lightmap UVs, cameras).
-
-    The scene keeps the model's lightmap UVs only where the settings bake into them
-    (:func:`~raytrad.products.lightmap.choose_lightmap_uvs`).
-    """
+    """Read a scene file with what ``settings`` needs of it (lightmap UVs, cameras): the
+    scene keeps the model's lightmap UVs only where the settings bake into them
+    (:func:`~raytrad.products.lightmap.choose_lightmap_uvs`)."""
     settings = settings or RenderSettings()
     uv_set = settings.lightmap.uv_set_to_read if settings.lightmap else None
     loaded = load_scene_file(

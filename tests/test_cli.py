@@ -522,3 +522,27 @@ def test_the_summary_counts_one_refinement_round_in_the_singular(
     }
     _print_summary(report, {})
     assert "+5 receivers in 1 round (solved 5;" in capsys.readouterr().out
+
+
+def test_progress_bars_follow_the_stages(capsys: pytest.CaptureFixture[str]) -> None:
+    """On a terminal: a bar for the pass's columns, one for the solve's shots, one for
+    each final gather's patches, each closed when the next stage starts."""
+    from raytrad.cli import _Progress
+
+    bars = _Progress(enabled=True)
+    bars.enabled = True  # as on a terminal (pytest's stderr is not one)
+    for done in range(1, 4):
+        bars.stage("form factors", done, 3)
+    assert bars._stage is None  # the pass's bar ends with its last column
+    bars(api.RenderProgress(5, 0.1, 100, 0.5, 0.1, 1.0))
+    assert bars._bar is not None and bars._bar.n == 5
+    bars.stage("final gather", 1, 2)
+    assert bars._bar is None and bars._stage is not None  # the solve's bar closed
+    first = bars._stage[1]
+    bars.stage("final gather", 2, 2)
+    assert bars._stage is None  # the round's gather is done
+    bars.stage("final gather", 1, 2)  # the next round's: a new bar
+    assert bars._stage is not None and bars._stage[1] is not first
+    bars.close()
+    err = capsys.readouterr().err
+    assert "form factors" in err and "5shot" in err and "final gather" in err

@@ -3,12 +3,13 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
 import logging
 import math
 import signal
 import sys
 import time
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -33,23 +34,33 @@ def _verify(directory: Path) -> int:
 
 
 class _Progress:
-    """A tqdm progress bar on a terminal; nothing when output is redirected (CI logs).
+    """tqdm progress bars on a terminal; nothing when output is redirected (CI logs, which
+    get the pass's progress as log lines instead).
 
-    Shows shots, the residual (unshot power / emitted power), the error estimate, rays/s
-    and the time to the target tolerance extrapolated from the recent decay.
+    One bar a stage: the form-factor pass (columns), the solve (shots, the residual
+    (unshot power / emitted power), the error estimate, rays/s and the time to the target
+    tolerance extrapolated from the recent decay) and each refinement round's final
+    gather (patches). tqdm gives the pass's and the gathers' time left from their rates.
     """
 
     def __init__(self, enabled: bool) -> None:
-        self._bar: Any = None
-        if enabled and sys.stderr.isatty():
-            from tqdm import tqdm
-
-            self._bar = tqdm(unit="shot", dynamic_ncols=True, file=sys.stderr, mininterval=0.25)
+        self.enabled = enabled and sys.stderr.isatty()
+        self._bar: Any = None  # the solve's
+        self._stage: tuple[str, Any] | None = None  # (name, bar) of the pass or a gather
         self._last = 0.0
 
+    @staticmethod
+    def _new_bar(**options: Any) -> Any:
+        from tqdm import tqdm
+
+        return tqdm(dynamic_ncols=True, file=sys.stderr, mininterval=0.25, **options)
+
     def __call__(self, report: api.RenderProgress) -> None:
-        if self._bar is None:
+        if not self.enabled:
             return
+        self._end_stage()
+        if self._bar is None:
+            self._bar = self._new_bar(unit="shot", desc="solve")
         self._bar.update(report.shots - self._bar.n)
         now = time.perf_counter()
         if now - self._last > 0.25:
@@ -61,9 +72,44 @@ class _Progress:
             )
             self._last = now
 
+    def stage(self, name: str, done: int, total: int) -> None:
+        """``done`` of ``total`` columns of the pass, or patches of a final gather."""
+        if not self.enabled:
+            return
+        if self._bar is not None:  # the solve is over
+            self._bar.close()
+            self._bar = None
+        if self._stage is None or self._stage[0] != name or done < self._stage[1].n:
+            self._end_stage()
+            unit = "column" if name == "form factors" else "patch"
+            self._stage = (name, self._new_bar(total=total, desc=name, unit=unit, leave=False))
+        bar = self._stage[1]
+        bar.update(done - bar.n)
+        if done >= total:
+            self._end_stage()
+
+    def _end_stage(self) -> None:
+        if self._stage is not None:
+            self._stage[1].close()
+            self._stage = None
+
     def close(self) -> None:
+        self._end_stage()
         if self._bar is not None:
             self._bar.close()
+
+
+@contextlib.contextmanager
+def _log_above(bars: bool) -> Iterator[None]:
+    """Log lines printed above the progress bars rather than through them (tqdm's
+    redirect of the console handlers), when there are bars."""
+    if not bars:
+        yield
+        return
+    from tqdm.contrib.logging import logging_redirect_tqdm
+
+    with logging_redirect_tqdm():
+        yield
 
 
 def _compare(args: argparse.Namespace) -> int:
@@ -87,17 +133,18 @@ def _render(args: argparse.Namespace) -> int:
         "checkpoint (Ctrl-C again to abort)"
     )
     try:
-        with stopping_on_signals(stop):
-            outcome = api.render(
-                args.scene,
-                args.output,
-                settings,
-                args.resume,
-                progress,
-                stop,
-                reference=args.reference,
-                plot=args.plot,
-            )
+        with stopping_on_signals(stop), _log_above(progress.enabled):
+            with api.stage_progress(progress.stage if progress.enabled else None):
+                outcome = api.render(
+                    args.scene,
+                    args.output,
+                    settings,
+                    args.resume,
+                    progress,
+                    stop,
+                    reference=args.reference,
+                    plot=args.plot,
+                )
     finally:
         progress.close()
     if not args.quiet:

@@ -28,6 +28,7 @@ from typing import TypeVar, overload
 import numpy as np
 
 from raytrad.constants import scene_diagonal, tol
+from raytrad.core import stages
 from raytrad.core.balance import BALANCE_ITERATIONS, balance_streamed, closed_patches
 from raytrad.core.columns import (
     Column,
@@ -590,9 +591,8 @@ class FormFactorEngine:
         try:
             for patch, (near, factors, rays, gather) in zip(patches, done, strict=True):
                 self.rays_cast += rays
-                factors = factors * self._col_scale[patch]
-                rows.row_sum[near] += factors
-                rows.patches.append((patch, near, factors, gather))
+                rows.add(patch, near, factors * self._col_scale[patch], gather)
+                stages.report(stages.FINAL_GATHER, patch + 1, len(patches))
                 if stop is not None and stop():
                     return None
         finally:

@@ -139,6 +139,12 @@ class GatherRows:
     patches: list[tuple[int, np.ndarray, np.ndarray, GatherWeights]]
     means: SubareaMeans | None = None  # the sources beyond the receivers
 
+    def add(self, patch: int, near: np.ndarray, factors: np.ndarray, gather: GatherWeights) -> None:
+        """Patch ``patch``'s row: the points ``near`` (indices) that see it, their balanced
+        ``factors`` (added to ``row_sum``) and their gather weights."""
+        self.row_sum[near] += factors
+        self.patches.append((patch, near, factors, gather))
+
     @functools.cached_property
     def read_nodes(self) -> np.ndarray:
         """(K,) int64: the nodes whose means the rows' gather weights read, ascending

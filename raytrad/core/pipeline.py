@@ -23,6 +23,7 @@ import numpy as np
 
 from raytrad.arrays import unique
 from raytrad.constants import defaults, scene_extent, tol
+from raytrad.core import stages
 from raytrad.core.accuracy import (
     RAYS,
     SAMPLES,
@@ -176,6 +177,7 @@ def prepare(
 
         def column_done(done: int, total: int) -> None:
             progress(done, total)
+            stages.report(stages.FORM_FACTORS, done, total)
             if on_column is not None:
                 on_column(mesh, engine)
 
