@@ -51,12 +51,13 @@ from raytrad.core.kernels import _f64
 
 log = logging.getLogger(__name__)
 
-#: At most this many facets are culled against (2 words of bits per receiver); a scene with
+#: At most this many facets are culled against (4 words of bits per receiver); a scene with
 #: more is traced pair by pair, unculled. The tests per pair grow with the facets, the
-#: rays they save do not: in a room of turned blocks at 3 000 receivers, the culled pass
-#: (with the convex blockers) took 0.92 of the unculled pass's time at 27 facets, 1.00 at
-#: 87, 0.99 at 132 and 1.18 at 187 (2026-12-02).
-MAX_FACETS = 128
+#: rays they save do not: in rooms of turned blocks at 5 000 receivers the culled pass
+#: (with the convex blockers) took 0.68 of the unculled pass's time at 87 facets, 0.84 at
+#: 187, 1.08 at 327 and 1.21 at 507; at 15 000 receivers 0.93 at 327 and 1.05 at 507
+#: (2026-12-03, after the shaft test's bit index lost its ``log2``; 128 before that).
+MAX_FACETS = 256
 #: Normals within this of each other [1] and plane offsets within this x the scene
 #: diagonal fall in one coplanar group before the exact planarity check.
 _NORMAL_GRID = 1e-6

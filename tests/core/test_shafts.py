@@ -21,7 +21,7 @@ from raytrad.core.mesh import MeshSettings
 from raytrad.core.pipeline import Prepared, prepare
 from raytrad.core.shafts import MAX_FACETS, ShaftEnd, facets, shaft_end
 from raytrad.core.visibility import Occluder
-from raytrad.scene.builtin import shadow_scene
+from raytrad.scene.builtin import blocks_room, shadow_scene
 
 from .occluders import (
     CASES,
@@ -227,9 +227,16 @@ def test_constructed_cases_are_clear_only_where_no_segment_is_blocked(case: str)
         assert clear[middle].all()
 
 
-@pytest.fixture(scope="module", params=[1, 2])
+@pytest.fixture(scope="module", params=[1, 2, "blocks"])
 def room(request: pytest.FixtureRequest) -> Iterator[Prepared]:
-    prepared = prepare(furniture_room(request.param), MeshSettings(receivers=1500, patches=120))
+    """Rooms of furniture, and the bundled room of 36 blocks: 187 facets, culled since the
+    limit rose past 128."""
+    if request.param == "blocks":
+        prepared = prepare(blocks_room(6), MeshSettings(receivers=1200, patches=160))
+        assert prepared.engine._pairs.facets.count > 128
+    else:
+        scene = furniture_room(request.param)
+        prepared = prepare(scene, MeshSettings(receivers=1500, patches=120))
     yield prepared
     prepared.close()
 
