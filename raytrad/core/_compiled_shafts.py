@@ -30,7 +30,7 @@ FACE, HOLE, SHEET, EDGE = 0, 1, 2, 3
 #: The index of a word's lowest set bit ``low`` (the word with only that bit) is
 #: ``_BIT_INDEX[(low * _DE_BRUIJN) >> 58]``: each 6-bit window of this de Bruijn sequence
 #: occurs once. A multiply and a lookup, where ``log2`` of a float took a conversion and
-#: a library call: the shaft test took 0.64 of its time in a room of 187 facets (the same
+#: a library call: the shaft test took 0.66 of its time in a room of 187 facets (the same
 #: answers).
 _DE_BRUIJN = 0x022FDD63CC95386D
 _BIT_INDEX = np.zeros(64, dtype=np.int64)
