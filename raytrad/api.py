@@ -296,10 +296,10 @@ def render(
             add_total_error(report, error_log, error, refinement, solved.mesh.receiver_count)
             outputs["report"] = output_dir / "report.json"
             write_report(outputs["report"], report)
-            made_from = run_manifest.content_key(loaded, settings)
+            made_from = run_manifest.content_key(loaded, settings)  # the manifest goes last
             outputs["manifest"] = run_manifest.write_manifest(
                 output_dir, outputs, report, made_from
-            )  # last
+            )
         finally:
             prepared.close()
     return RenderOutcome(result, baked, outputs, report, error_log, refinement, error)
