@@ -536,6 +536,7 @@ def test_progress_bars_follow_the_stages(capsys: pytest.CaptureFixture[str]) -> 
     assert bars._stage is None  # the pass's bar ends with its last column
     bars(api.RenderProgress(5, 0.1, 100, 0.5, 0.1, 1.0))
     assert bars._bar is not None and bars._bar.n == 5
+    bars(api.RenderProgress(6, 0.1, 100, 0.25, 0.1, 1.0))  # within the throttle
     bars.stage("final gather", 1, 2)
     assert bars._bar is None and bars._stage is not None  # the solve's bar closed
     first = bars._stage[1]
@@ -545,4 +546,6 @@ def test_progress_bars_follow_the_stages(capsys: pytest.CaptureFixture[str]) -> 
     assert bars._stage is not None and bars._stage[1] is not first
     bars.close()
     err = capsys.readouterr().err
-    assert "form factors" in err and "5shot" in err and "final gather" in err
+    assert "form factors" in err and "6shot" in err and "final gather" in err
+    assert "residual 2.50e-01" in err  # the solve's bar closed on its last figures
+    assert "rays/s -" in err  # no rate over a tenth of a second

@@ -48,6 +48,7 @@ class _Progress:
         self._bar: Any = None  # the solve's
         self._stage: tuple[str, Any] | None = None  # (name, bar) of the pass or a gather
         self._last = 0.0
+        self._report: api.RenderProgress | None = None  # the solve's latest
 
     @staticmethod
     def _new_bar(**options: Any) -> Any:
@@ -62,23 +63,37 @@ class _Progress:
         if self._bar is None:
             self._bar = self._new_bar(unit="shot", desc="solve")
         self._bar.update(report.shots - self._bar.n)
+        self._report = report
         now = time.perf_counter()
         if now - self._last > 0.25:
-            rate = report.rays / report.seconds if report.seconds > 0 else 0.0
-            eta_text = f"{report.eta:.0f}s" if math.isfinite(report.eta) else "?"
-            self._bar.set_postfix_str(
-                f"residual {report.residual:.2e}  error~{report.estimate:.1e}  "
-                f"rays/s {rate:.3g}  ETA {eta_text}"
-            )
+            self._postfix()
             self._last = now
+
+    def _postfix(self) -> None:
+        """The solve's latest figures on its bar (rays/s once a quarter second is solved:
+        before, a handful of rays over microseconds reads as a rate)."""
+        report = self._report
+        if report is None:
+            return
+        rate = f"{report.rays / report.seconds:.3g}" if report.seconds >= 0.25 else "-"
+        eta_text = f"{report.eta:.0f}s" if math.isfinite(report.eta) else "?"
+        self._bar.set_postfix_str(
+            f"residual {report.residual:.2e}  error~{report.estimate:.1e}  "
+            f"rays/s {rate}  ETA {eta_text}"
+        )
+
+    def _end_solve(self) -> None:
+        """Close the solve's bar with its last figures, not the last throttled ones."""
+        if self._bar is not None:
+            self._postfix()
+            self._bar.close()
+            self._bar = None
 
     def stage(self, name: str, done: int, total: int) -> None:
         """``done`` of ``total`` columns of the pass, or patches of a final gather."""
         if not self.enabled:
             return
-        if self._bar is not None:  # the solve is over
-            self._bar.close()
-            self._bar = None
+        self._end_solve()  # the solve is over, if it ran
         if self._stage is None or self._stage[0] != name or done < self._stage[1].n:
             self._end_stage()
             unit = "column" if name == "form factors" else "patch"
@@ -95,8 +110,7 @@ class _Progress:
 
     def close(self) -> None:
         self._end_stage()
-        if self._bar is not None:
-            self._bar.close()
+        self._end_solve()
 
 
 @contextlib.contextmanager
