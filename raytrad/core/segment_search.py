@@ -80,6 +80,8 @@ def items_near_segments(
         # more: finer cells, fewer far items measured)
         share = 4.0 if fast is None else _SAMPLES_PER_ITEM
         cell = max(2.0 * float(reach[rows].max()), length / (share * (len(rows) + len(segments))))
+        if not cell > 0.0:  # points at zero reach of point segments: any cell finds them
+            cell = 1.0
         class_points = np.ascontiguousarray(points[rows], dtype=np.float64)
         if fast is not None:  # found and measured in one loop
             item, segment = fast.segment_candidates(

@@ -83,3 +83,19 @@ def test_the_compiled_search_finds_the_numpy_pairs_on_adversarial_input(
     inside = set(zip(*np.nonzero(distance <= reach[:, None] * (1 - 1e-9)), strict=True))
     assert inside <= set(zip(found[0].tolist(), found[1].tolist(), strict=True))
     assert len(inside) > 40
+
+
+@pytest.mark.parametrize("kernels", ["compiled", "numpy"])
+def test_zero_reach_of_point_segments_finds_the_points_on_them(
+    kernels: str, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Every segment a point and every reach 0 (no length to size the cells by): the
+    items at a segment's point are found, the others not, without dividing by zero."""
+    from raytrad.core import segment_search
+
+    monkeypatch.setenv("RAYTRAD_KERNELS", kernels)
+    monkeypatch.setattr(segment_search, "COMPILED_SEGMENTS", 0)
+    points = np.array([[1.0, 2.0, 3.0], [1.0, 2.0, 3.5], [4.0, 5.0, 6.0]])
+    segments = np.array([[[1.0, 2.0, 3.0]] * 2, [[4.0, 5.0, 6.0]] * 2])
+    item, segment = segment_search.items_near_segments(points, segments, 0.0)
+    assert item.tolist() == [0, 2] and segment.tolist() == [0, 1]
