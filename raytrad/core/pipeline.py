@@ -23,7 +23,7 @@ import numpy as np
 
 from raytrad.arrays import unique
 from raytrad.constants import defaults, scene_extent, tol
-from raytrad.core import stages
+from raytrad.core import compiled, stages
 from raytrad.core.accuracy import (
     RAYS,
     SAMPLES,
@@ -147,6 +147,8 @@ def prepare(
     """
     mesh_settings = mesh_settings or MeshSettings()
     timings: dict[str, float] = {}
+    with timed(timings, "kernels"):  # compiled the first time: not the pass's or mesh's time
+        compiled.get()
     with timed(timings, "mesh"):
         scene = repair_scene(scene)
     if not has_emission(scene):  # after repair, which may have dropped the emitters

@@ -27,7 +27,7 @@ def test_a_convex_enclosure_gets_no_acceleration_and_no_rays() -> None:
         assert prepared.occluder is None and prepared.closed_receivers is None
         assert prepared.engine.rays_cast == 0
         assert prepared.engine.columns_computed == prepared.mesh.patch_count
-        assert set(prepared.timings) == {"mesh", "acceleration", "form_factors"}
+        assert set(prepared.timings) == {"kernels", "mesh", "acceleration", "form_factors"}
 
 
 def test_an_occluding_scene_is_probed_and_balanced() -> None:

@@ -185,6 +185,7 @@ def test_timings_name_every_stage(furnace_run: tuple[Path, dict[str, Any]]) -> N
     assert {"load", "acceleration", "mesh", "solve", "write", "reference"} <= set(timings)
     assert set(timings) <= {
         "load",
+        "kernels",
         "acceleration",
         "mesh",
         "form_factors",
