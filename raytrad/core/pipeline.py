@@ -147,8 +147,6 @@ def prepare(
     """
     mesh_settings = mesh_settings or MeshSettings()
     timings: dict[str, float] = {}
-    with timed(timings, "kernels"):  # compiled the first time: not the pass's or mesh's time
-        compiled.get()
     with timed(timings, "mesh"):
         scene = repair_scene(scene)
     if not has_emission(scene):  # after repair, which may have dropped the emitters
@@ -160,7 +158,9 @@ def prepare(
             occluder = Occluder(scene.positions, scene.triangles)
     with timed(timings, "mesh"):
         mesh = build_mesh(scene, mesh_settings, _enclosure_test(scene, occluder))
-    check_solvable(mesh)
+    check_solvable(mesh)  # a scene that cannot be solved fails before any compiling
+    with timed(timings, "kernels"):  # compiled the first time: not the pass's time
+        compiled.get()
     closed = None
     with timed(timings, "form_factors"):
         if occluder is not None:
