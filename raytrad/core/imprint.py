@@ -55,7 +55,6 @@ PLANE_BAND = 1e-9
 #: Rounds of snapping and splitting: a round re-tests the edges a neighbour's move blocked.
 IMPRINT_ROUNDS = 4
 
-
 #: An edge is not split nearer its end than this fraction of its length (a sliver).
 MIN_SPLIT = 0.02
 
