@@ -127,8 +127,9 @@ def blocked_pairs(
         dz = patch_center[2] - o[2]
         length2 = dx * dx + dy * dy + dz * dz
         # the capsule test only chooses which blockers get the exact test, so its rounding
-        # (a product by the inverse, squares) may differ from the reference's: a blocker
-        # passed over leaves the pair traced, to the same factor (0.80 of the time)
+        # (a product by the inverse, squares; 0.80 of the division's and root's time) may
+        # differ from the reference's: a blocker passed over leaves the pair traced, to
+        # the same factor
         inverse = 1.0 / length2 if length2 > 0.0 else 0.0
         gap = math.sqrt(length2) - reach
         for step in range(count):
