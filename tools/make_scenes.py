@@ -3,7 +3,8 @@
 
 Writes ``cornell-box.obj``/``.mtl``, ``furnace.obj``/``.mtl`` (reflectance 0.5, emitted
 exitance 1 W m-2), ``blocks-room.obj``/``.mtl`` (36 blocks on a room's floor: many
-objects), ``shadow.glb`` (glTF, so its double-sided occluder stays
+objects), ``ball-box.obj``/``.mtl`` (the Cornell box with a ball of 1 280 triangles: a
+curved object), ``shadow.glb`` (glTF, so its double-sided occluder stays
 double-sided) and ``cornell-box-uv.glb``: the Cornell box as a game asset would come, one
 node per object, authored lightmap UVs in ``TEXCOORD_1`` (an xatlas layout for a 256 x 256
 lightmap) and two cameras, ``front`` (the Cornell box camera) and ``corner`` (16:9).
@@ -34,7 +35,13 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     if str(REPOSITORY) not in sys.path:  # run from a checkout without installing raytrad
         sys.path.insert(0, str(REPOSITORY))
-    from raytrad.scene.builtin import blocks_room, cornell_box, furnace_box, shadow_scene
+    from raytrad.scene.builtin import (
+        ball_box,
+        blocks_room,
+        cornell_box,
+        furnace_box,
+        shadow_scene,
+    )
     from raytrad.scenefiles import write_glb, write_obj
 
     out: Path = args.out
@@ -42,11 +49,12 @@ def main(argv: list[str] | None = None) -> int:
     write_obj(furnace_box(reflectance=0.5, emitted_exitance=1.0), out / "furnace.obj")
     write_glb(shadow_scene(), out / "shadow.glb")
     write_obj(blocks_room(), out / "blocks-room.obj")
+    write_obj(ball_box(), out / "ball-box.obj")
     lightmapped, cameras = _lightmapped_cornell_box()
     write_glb(lightmapped, out / "cornell-box-uv.glb", cameras)
     log.info(
-        "wrote cornell-box.obj/.mtl, furnace.obj/.mtl, shadow.glb, cornell-box-uv.glb and "
-        "blocks-room.obj/.mtl to %s",
+        "wrote cornell-box.obj/.mtl, furnace.obj/.mtl, shadow.glb, cornell-box-uv.glb, "
+        "blocks-room.obj/.mtl and ball-box.obj/.mtl to %s",
         out,
     )
     return 0

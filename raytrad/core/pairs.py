@@ -26,6 +26,7 @@ from raytrad.core import compiled
 from raytrad.core.blockers import Blockers, blockers, target_corners
 from raytrad.core.clusters import disk_factors, runs
 from raytrad.core.contour import piecewise_contour_form_factor, planar_contour_form_factor
+from raytrad.core.facets import facets
 from raytrad.core.gather import (
     EMPTY,
     GATHER_RADII,
@@ -43,7 +44,7 @@ from raytrad.core.kernels import (
 )
 from raytrad.core.mesh import RadiosityMesh
 from raytrad.core.outline import boundary_edges, folded_pieces, patch_vertices
-from raytrad.core.shafts import Facets, ShaftEnd, facets, plane_hull, shaft_end
+from raytrad.core.shafts import Facets, ShaftEnd, plane_hull, shaft_end
 from raytrad.core.spread import RULE_POINTS, RULE_WEIGHTS, GatherShares, corner_form_factors
 from raytrad.core.visibility import Occluder
 

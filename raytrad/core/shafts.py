@@ -27,9 +27,11 @@ so only the furniture is ever tested.
 
 The per-receiver bits are packed 64 facets to a word; per (receiver, patch) pair the
 candidate facets are then a few word operations, and only those get the capsule and
-plane tests (:func:`shaft_clear`, compiled). Scenes with more than
-:data:`MAX_FACETS` facets (curved, finely tessellated surfaces) are not culled: every pair
-is traced, as before.
+plane tests (:func:`shaft_clear`, compiled). The facets come from
+:func:`raytrad.core.facets.facets`: curved or finely tessellated surfaces make a facet of
+every triangle, and past a few hundred facets the small ones are gathered into a few
+*volumes* (a bounding sphere and box, no plane), which every pair tests, so such a scene
+is culled around them instead of traced pair by pair.
 
 References
 ----------
@@ -45,22 +47,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from raytrad.constants import tol
 from raytrad.core import compiled
 from raytrad.core.kernels import _f64
 
 log = logging.getLogger(__name__)
-
-#: At most this many facets are culled against (4 words of bits per receiver); a scene with
-#: more is traced pair by pair, unculled. The tests per pair grow with the facets, the
-#: rays they save do not: in rooms of turned blocks at 5 000 receivers the culled pass
-#: (with the convex blockers) took 0.68 of the unculled pass's time at 87 facets, 0.84 at
-#: 187, 1.08 at 327 and 1.21 at 507; at 15 000 receivers 0.93 at 327 and 1.05 at 507
-#: (2026-12-03, after the shaft test's bit index lost its ``log2``; 128 before that).
-MAX_FACETS = 256
-#: Normals within this of each other [1] and plane offsets within this x the scene
-#: diagonal fall in one coplanar group before the exact planarity check.
-_NORMAL_GRID = 1e-6
 
 
 @dataclass(frozen=True)
@@ -69,12 +59,14 @@ class Facets:
 
     Attributes
     ----------
-    normal : (Q, 3) float64, unit plane normals (sign fixed: largest component positive)
-    offset : (Q,) float64, plane offsets: ``normal . p = offset`` on the plane [m]
+    normal : (Q, 3) float64, unit plane normals (sign fixed: largest component positive);
+        0 for a volume (:func:`raytrad.core.facets.facets`), never on a side of anything
+    offset : (Q,) float64, plane offsets: ``normal . p = offset`` on the plane [m]; 0 for
+        a volume
     center : (Q, 3) float64, bounding-sphere centres [m]
     radius : (Q,) float64, bounding-sphere radii [m]
     hull, hull_ptr : (K, 3) float64, (Q + 1,) int64: each facet's convex hull in its plane,
-        counter-clockwise about ``normal`` (CSR) [m]
+        counter-clockwise about ``normal``, or a volume's 8 box corners (CSR) [m]
     flat : float
         Every facet's corners lie within ``flat`` of its plane; points within it are on
         the plane [m].
@@ -249,73 +241,6 @@ def prism(hull: np.ndarray, normal: np.ndarray, height: float) -> np.ndarray:
     its ``normal`` [m]: with ``height`` twice the ray targets' lift plus the patch's own
     height range, a convex set that holds every ray target."""
     return np.concatenate([hull + height * normal, hull - height * normal])
-
-
-def facets(positions: np.ndarray, triangles: np.ndarray, diagonal: float) -> Facets | None:
-    """The planar facets of the blocking triangles, or None when there are more than
-    :data:`MAX_FACETS` (no culling).
-
-    Triangles are grouped by their plane (normal and offset on a fine grid); a triangle
-    whose corners are not all within ``tol.horizon`` x ``diagonal`` of its group's plane
-    becomes a facet of its own, so every facet is flat to that tolerance. Triangles without
-    area block nothing and are left out.
-
-    Parameters
-    ----------
-    positions : (V, 3) float64 [m]
-    triangles : (T, 3) int
-    diagonal : float
-        The scene's diagonal [m].
-    """
-    corners = np.asarray(positions, dtype=np.float64)[np.asarray(triangles)]
-    normal = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
-    length = np.linalg.norm(normal, axis=1)
-    keep = length > 0
-    corners, normal = corners[keep], normal[keep] / length[keep, None]
-    lead = np.abs(normal).argmax(axis=1)
-    normal *= np.sign(normal[np.arange(len(normal)), lead])[:, None]
-    offset = np.einsum("tj,tj->t", normal, corners.mean(axis=1))
-    flat = tol.horizon * diagonal
-    key = np.concatenate(
-        [np.round(normal / _NORMAL_GRID), np.round(offset / (_NORMAL_GRID * diagonal))[:, None]],
-        axis=1,
-    ).astype(np.int64)
-    _, group = np.unique(key, axis=0, return_inverse=True)
-    group = group.reshape(-1)
-    lead_tri = np.full(group.max(initial=-1) + 1, -1)
-    lead_tri[group[::-1]] = np.arange(len(group))[::-1]  # first triangle of each group
-    plane_n, plane_d = normal[lead_tri[group]], offset[lead_tri[group]]
-    off_plane = np.abs(np.einsum("tkj,tj->tk", corners, plane_n) - plane_d[:, None]).max(axis=1)
-    alone = off_plane > flat
-    group = np.where(alone, group.max(initial=-1) + 1 + np.arange(len(group)), group)
-    _, group = np.unique(group, return_inverse=True)
-    count = int(group.max(initial=-1)) + 1
-    if count > MAX_FACETS:
-        log.debug("%d facets > %d: no shaft culling", count, MAX_FACETS)
-        return None
-    first = np.full(count, -1)
-    first[group[::-1]] = np.arange(len(group))[::-1]
-    n, d = normal[first], offset[first]
-    lo = np.full((count, 3), np.inf)
-    hi = np.full((count, 3), -np.inf)
-    np.minimum.at(lo, group, corners.min(axis=1))
-    np.maximum.at(hi, group, corners.max(axis=1))
-    center = 0.5 * (lo + hi)
-    reach = np.linalg.norm(corners - center[group][:, None, :], axis=2).max(axis=1)
-    radius = np.zeros(count)
-    np.maximum.at(radius, group, reach)
-    hulls = [plane_hull(corners[group == q].reshape(-1, 3), n[q]) for q in range(count)]
-    hull_ptr = np.concatenate([[0], np.cumsum([len(h) for h in hulls])]).astype(np.int64)
-    return Facets(
-        n,
-        d,
-        center,
-        radius + flat,
-        np.concatenate(hulls) if hulls else np.zeros((0, 3)),
-        hull_ptr,
-        flat,
-        0.25 * tol.ray_offset * diagonal,
-    )
 
 
 def shaft_clear(
@@ -562,10 +487,8 @@ def _pack(bits: np.ndarray, words: int) -> np.ndarray:
 
 
 __all__ = [
-    "MAX_FACETS",
     "Facets",
     "ShaftEnd",
-    "facets",
     "numpy_shaft_clear",
     "plane_hull",
     "prism",

@@ -1,5 +1,5 @@
-"""Built-in scenes, in metres: the Cornell box, the white furnace, an open shadow scene and
-a room of many blocks.
+"""Built-in scenes, in metres: the Cornell box, the white furnace, an open shadow scene, a
+room of many blocks and the Cornell box with a tessellated ball.
 
 Every function returns a validated :class:`~raytrad.scene.Scene` built with
 :class:`~raytrad.scene.builder.SceneBuilder`: quads split along their first diagonal
@@ -16,7 +16,7 @@ import numpy as np
 
 from raytrad.constants import defaults
 from raytrad.errors import SettingsError
-from raytrad.scene.builder import quads_scene
+from raytrad.scene.builder import SceneBuilder, icosphere, quads_scene
 from raytrad.scene.camera import Camera
 from raytrad.scene.model import Scene
 
@@ -119,6 +119,36 @@ def cornell_box() -> Scene:
     return quads_scene(corners, CORNELL_MATERIALS, quad_material, facing, quad_object)
 
 
+#: The ball of :func:`ball_box`: its centre [mm], radius [mm] and icosphere subdivisions
+#: (20 x 4**3 = 1 280 triangles).
+BALL_CENTRE_MM = (450.0, 80.1, 120.0)
+BALL_RADIUS_MM = 80.0
+BALL_SUBDIVISIONS = 3
+
+
+def ball_box() -> Scene:
+    """The Cornell box (:func:`cornell_box`, the same quads, materials and objects) with a
+    ``white`` ball of 1 280 triangles (object ``ball``) between the short block and the
+    red wall, 0.1 mm above the floor: a curved object, each of whose triangles is a plane
+    of its own, as a modelled scene's rounded furniture is."""
+    base = cornell_box()
+    builder = SceneBuilder()
+    for name, (reflectance, emitted, double_sided) in CORNELL_MATERIALS.items():
+        builder.material(name, reflectance, emitted, double_sided)
+    corners = base.positions[base.triangles]
+    for t in range(base.triangle_count):
+        builder.triangle(
+            corners[t],
+            base.material_names[base.material_index[t]],
+            obj=base.object_names[base.object_index[t]],
+        )
+    unit, triangles = icosphere(BALL_SUBDIVISIONS)
+    centre = np.array(BALL_CENTRE_MM) * MM
+    for tri in triangles:
+        builder.triangle(centre + BALL_RADIUS_MM * MM * unit[tri], "white", obj="ball")
+    return builder.build()
+
+
 CORNELL_CAMERA = Camera(
     (0.278, 0.273, -0.800), (0.278, 0.273, 0.0), (0.0, 1.0, 0.0), defaults.vertical_fov_deg
 )
@@ -217,7 +247,7 @@ def blocks_room(blocks_per_side: int = 6, seed: int = 1) -> Scene:
     touch. Each block is five quads (top and sides; its foot is open, as a crate's).
     The same ``seed`` gives the same scene. A test of many occluders and contact
     outlines: 36 blocks give 187 planar facets (the default), within the shaft
-    culling's limit (:data:`raytrad.core.shafts.MAX_FACETS`); 8 x 8 give 327, past it.
+    culling's limit (:data:`raytrad.core.facets.MAX_FACETS`); 8 x 8 give 327, past it.
 
     Parameters
     ----------
@@ -262,5 +292,6 @@ BUILTIN_SCENES: dict[str, Callable[[], Scene]] = {
     "furnace": furnace_box,
     "shadow": shadow_scene,
     "blocks-room": blocks_room,
+    "ball-box": ball_box,
 }
 """Built-in scenes by name (each callable with no arguments)."""

@@ -10,7 +10,7 @@ import numpy as np
 from raytrad.constants import tol
 from raytrad.core.visibility import Occluder
 from raytrad.scene import Scene
-from raytrad.scene.builder import quads_scene
+from raytrad.scene.builder import SceneBuilder, icosphere, quads_scene
 
 DIAGONAL = 10.0
 LIFT = tol.ray_offset * DIAGONAL
@@ -180,3 +180,36 @@ def furniture_room(seed: int, blocks: int = 4) -> Scene:
         material,
         np.array(facing, dtype=float),
     )
+
+
+def ball_room(subdivisions: int = 3) -> Scene:
+    """A 4 x 3 x 4 m room lit from a ceiling panel, with a box and a tessellated ball of
+    ``20 * 4**subdivisions`` triangles on the floor (y up): past the shaft test's facets,
+    so its small facets are gathered into volumes."""
+    s, h = 4.0, 3.0
+    builder = SceneBuilder()
+    builder.material("wall", 0.6)
+    builder.material("light", 0.0, 10.0)
+    builder.material("block", 0.5)
+    room = [
+        ([[0, 0, 0], [0, 0, s], [s, 0, s], [s, 0, 0]], (0, 1, 0)),
+        ([[0, h, 0], [s, h, 0], [s, h, s], [0, h, s]], (0, -1, 0)),
+        ([[0, 0, 0], [s, 0, 0], [s, h, 0], [0, h, 0]], (0, 0, 1)),
+        ([[0, 0, s], [0, h, s], [s, h, s], [s, 0, s]], (0, 0, -1)),
+        ([[0, 0, 0], [0, h, 0], [0, h, s], [0, 0, s]], (1, 0, 0)),
+        ([[s, 0, 0], [s, 0, s], [s, h, s], [s, h, 0]], (-1, 0, 0)),
+    ]
+    for quad, facing in room:
+        builder.quad(np.array(quad, dtype=float), "wall", facing, "room")
+    y = h - 0.01
+    light = [[1.5, y, 1.5], [2.5, y, 1.5], [2.5, y, 2.5], [1.5, y, 2.5]]
+    builder.quad(np.array(light), "light", (0, -1, 0), "light")
+    points, triangles = box(np.array([2.8, 0.5, 1.2]), np.array([0.4, 0.5, 0.3]), 0.4, False)
+    for tri in triangles:
+        corners = points[tri]
+        builder.triangle(corners, "block", corners.mean(axis=0) - [2.8, 0.5, 1.2], "box")
+    unit, triangles = icosphere(subdivisions)
+    centre = np.array([1.4, 0.6, 2.4])
+    for tri in triangles:
+        builder.triangle(centre + 0.6 * unit[tri], "block", unit[tri].mean(axis=0), "ball")
+    return builder.build()

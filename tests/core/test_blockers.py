@@ -16,6 +16,7 @@ from raytrad.core import compiled
 from raytrad.core.formfactor import FormFactorEngine
 from raytrad.core.mesh import MeshSettings
 from raytrad.core.visibility import Occluder
+from raytrad.scene.builder import icosphere
 from raytrad.scene.builtin import shadow_scene
 
 from .occluders import (
@@ -50,6 +51,17 @@ def test_closed_and_open_boxes_are_solids() -> None:
         *join(box(np.zeros(3), np.ones(3)), box(np.full(3, 5.0), np.ones(3))), DIAGONAL
     )
     assert two is not None and two.count == 2
+
+
+def test_convex_components_of_many_planes_are_left_out() -> None:
+    """A ball of 80 faces (more than MAX_PLANES) blocks nothing; of 20 faces, and beside
+    the large one a box, it does."""
+    fine, coarse = icosphere(2), icosphere(0)
+    assert len(fine[1]) > bl.MAX_PLANES >= len(coarse[1])
+    assert bl.blockers(*fine, DIAGONAL) is None
+    assert bl.blockers(*coarse, DIAGONAL).count == 1
+    both = bl.blockers(*join(fine, box(np.array([3.0, 0, 0]), np.ones(3))), DIAGONAL)
+    assert both.count == 1 and np.allclose(both.center[0], [3.0, 0, 0])
 
 
 def test_non_convex_components_block_nothing() -> None:

@@ -16,10 +16,11 @@ import pytest
 
 from raytrad.core import compiled, shafts
 from raytrad.core.blockers import target_corners
+from raytrad.core.facets import MAX_FACETS, VOLUMES, facets
 from raytrad.core.formfactor import FormFactorEngine
 from raytrad.core.mesh import MeshSettings
 from raytrad.core.pipeline import Prepared, prepare
-from raytrad.core.shafts import MAX_FACETS, ShaftEnd, facets, shaft_end
+from raytrad.core.shafts import ShaftEnd, shaft_end
 from raytrad.core.visibility import Occluder
 from raytrad.scene.builtin import blocks_room, shadow_scene
 
@@ -29,6 +30,7 @@ from .occluders import (
     LIFT,
     PLATE,
     SWEEP,
+    ball_room,
     furniture_room,
     join,
     quad_targets,
@@ -36,71 +38,12 @@ from .occluders import (
     trace,
 )
 
-CUBE = np.array([[x, y, z] for x in (0.0, 1.0) for y in (0.0, 1.0) for z in (0.0, 1.0)])
-# the cube's 6 faces as 12 triangles (corner index = 4x + 2y + z)
-CUBE_TRIANGLES = np.array(
-    [
-        [0, 1, 3], [0, 3, 2], [4, 6, 7], [4, 7, 5],  # x = 0, x = 1
-        [0, 4, 5], [0, 5, 1], [2, 3, 7], [2, 7, 6],  # y = 0, y = 1
-        [0, 2, 6], [0, 6, 4], [1, 5, 7], [1, 7, 3],  # z = 0, z = 1
-    ]
-)  # fmt: skip
-
 
 def _unpack(packed: np.ndarray, count: int) -> tuple[np.ndarray, np.ndarray]:
     words = packed.shape[-1] // 2
     bits = np.unpackbits(packed.astype("<u8").view(np.uint8), axis=-1, bitorder="little")
     bits = bits.astype(bool)
     return bits[..., :count], bits[..., 64 * words : 64 * words + count]
-
-
-def _polygon_area(ring: np.ndarray) -> float:
-    return 0.5 * float(np.linalg.norm(np.cross(ring, np.roll(ring, -1, axis=0)).sum(axis=0)))
-
-
-def test_unit_cube_has_six_square_facets() -> None:
-    found = facets(CUBE, CUBE_TRIANGLES, diagonal=np.sqrt(3.0))
-    assert found is not None and found.count == 6
-    # one facet per axis-aligned plane, at offsets 0 and 1
-    planes = sorted(
-        (int(np.abs(n).argmax()), round(float(d), 12))
-        for n, d in zip(found.normal, found.offset, strict=True)
-    )
-    assert planes == [(0, 0.0), (0, 1.0), (1, 0.0), (1, 1.0), (2, 0.0), (2, 1.0)]
-    np.testing.assert_allclose(found.radius, np.sqrt(0.5), rtol=1e-8)
-    for q in range(6):
-        ring = found.hull[found.hull_ptr[q] : found.hull_ptr[q + 1]]
-        assert len(ring) == 4
-        assert _polygon_area(ring) == pytest.approx(1.0, rel=1e-12)
-        # counter-clockwise about the facet's normal
-        turn = np.cross(ring[1] - ring[0], ring[2] - ring[1])
-        assert turn @ found.normal[q] > 0
-
-
-def test_coplanar_triangles_share_a_facet_and_tilted_ones_do_not() -> None:
-    # two triangles of a square in z = 0, and a square folded by 1e-3 along its diagonal
-    positions = np.array(
-        [
-            [0, 0, 0],
-            [1, 0, 0],
-            [1, 1, 0],
-            [0, 1, 0],
-            [0, 0, 1],
-            [1, 0, 1],
-            [1, 1, 1.001],
-            [0, 1, 1],
-        ],
-        dtype=float,
-    )
-    triangles = np.array([[0, 1, 2], [0, 2, 3], [4, 5, 6], [4, 6, 7]])
-    found = facets(positions, triangles, diagonal=2.0)
-    assert found is not None and found.count == 3
-
-
-def test_too_many_facets_turns_culling_off() -> None:
-    rng = np.random.default_rng(3)
-    corners = rng.normal(size=(MAX_FACETS + 1, 3, 3))
-    assert facets(corners.reshape(-1, 3), np.arange(corners.size // 3).reshape(-1, 3), 5.0) is None
 
 
 def _soup(rng: np.random.Generator, count: int) -> tuple[np.ndarray, np.ndarray]:
@@ -160,13 +103,23 @@ def _shaft_args(found, origins: np.ndarray, patch_sides: np.ndarray, end: ShaftE
 
 
 @pytest.mark.skipif(compiled.get() is None, reason="numba is not installed")
-@pytest.mark.parametrize("count", [5, 64, 120])
+@pytest.mark.parametrize("count", [5, 64, 120, 620])
 def test_compiled_shaft_test_matches_numpy(count: int) -> None:
     rng = np.random.default_rng(count)
-    found = facets(*_soup(rng, count), diagonal=1.7)
+    if count > MAX_FACETS:  # 20 large triangles, and 600 small ones about a point
+        positions, triangles = _soup(rng, 20)
+        small = rng.normal(0.25, 0.06, size=(count - 20, 1, 3)) + 0.01 * rng.normal(
+            size=(count - 20, 3, 3)
+        )
+        positions = np.concatenate([positions, small.reshape(-1, 3)])
+        triangles = np.arange(len(positions)).reshape(-1, 3)
+    else:
+        positions, triangles = _soup(rng, count)
+    found = facets(positions, triangles, diagonal=1.7)
     assert found is not None
+    assert (found.normal == 0).all(axis=1).any() == (count > MAX_FACETS)  # volumes
     origins = rng.uniform(-0.2, 1.2, size=(3000, 3))
-    origins[:300] = found.center[rng.integers(0, count, 300)]  # inside facets' spheres
+    origins[:300] = found.center[rng.integers(0, found.count, 300)]  # inside their spheres
     outcomes = set()
     for trial in range(12):
         if trial % 2:  # a folded patch: no outline
@@ -227,13 +180,17 @@ def test_constructed_cases_are_clear_only_where_no_segment_is_blocked(case: str)
         assert clear[middle].all()
 
 
-@pytest.fixture(scope="module", params=[1, 2, "blocks"])
+@pytest.fixture(scope="module", params=[1, 2, "blocks", "ball"])
 def room(request: pytest.FixtureRequest) -> Iterator[Prepared]:
-    """Rooms of furniture, and the bundled room of 36 blocks: 187 facets, culled since the
-    limit rose past 128."""
+    """Rooms of furniture, the bundled room of 36 blocks (187 facets, culled since the
+    limit rose past 128), and a room with a ball of 1 280 triangles (its facets in
+    volumes)."""
     if request.param == "blocks":
         prepared = prepare(blocks_room(6), MeshSettings(receivers=1200, patches=160))
         assert prepared.engine._pairs.facets.count > 128
+    elif request.param == "ball":
+        prepared = prepare(ball_room(), MeshSettings(receivers=1500, patches=120))
+        assert (prepared.engine._pairs.facets.normal == 0).all(axis=1).sum() == VOLUMES
     else:
         scene = furniture_room(request.param)
         prepared = prepare(scene, MeshSettings(receivers=1500, patches=120))

@@ -225,10 +225,40 @@ def test_shadow_scene_geometry_and_materials() -> None:
 
 
 def test_builtin_scene_registry() -> None:
-    assert set(BUILTIN_SCENES) == {"cornell-box", "furnace", "shadow", "blocks-room"}
+    assert set(BUILTIN_SCENES) == {"cornell-box", "furnace", "shadow", "blocks-room", "ball-box"}
     for name, build in BUILTIN_SCENES.items():
         scene = build()
         assert isinstance(scene, Scene) and scene.triangle_count > 0, name
+
+
+def test_ball_box_is_the_cornell_box_and_a_ball_clear_of_everything() -> None:
+    """The Cornell box's 32 triangles as they are, and 1 280 more on a sphere of 80 mm
+    about (450, 80.1, 120) mm, wound outward, with the area of its inscribed icosphere
+    (just under the sphere's 4 pi r^2), clear of the floor, the blocks and the walls."""
+    from raytrad.scene.builtin import ball_box
+
+    scene, box = ball_box(), cornell_box()
+    assert scene.triangle_count == 32 + 1280
+    corners = scene.positions[scene.triangles]
+    np.testing.assert_array_equal(corners[:32], box.positions[box.triangles])
+    ball = scene.object_index == scene.object_names.index("ball")
+    assert np.flatnonzero(ball).tolist() == list(range(32, 1312))
+    centre, radius = np.array([0.45, 0.0801, 0.12]), 0.08
+    points = corners[ball].reshape(-1, 3)
+    np.testing.assert_allclose(np.linalg.norm(points - centre, axis=1), radius, rtol=1e-12)
+    area, normal = triangle_areas_normals(corners[ball])
+    outward = corners[ball].mean(axis=1) - centre
+    assert (np.einsum("tj,tj->t", normal, outward) > 0).all()
+    assert 0.99 * 4 * np.pi * radius**2 < area.sum() < 4 * np.pi * radius**2
+    assert points[:, 1].min() > 0.0  # above the floor
+    assert points[:, 0].max() < box.positions[:, 0].max() - 0.01  # off the red wall
+    for block in ("short-block", "tall-block"):  # off each block's box, in x or z
+        mine = box.positions[box.triangles[box.object_index == box.object_names.index(block)]]
+        lo, hi = mine.reshape(-1, 3).min(axis=0), mine.reshape(-1, 3).max(axis=0)
+        apart = (points[:, [0, 2]].min(axis=0) > hi[[0, 2]]) | (
+            points[:, [0, 2]].max(axis=0) < lo[[0, 2]]
+        )
+        assert apart.any(), block
 
 
 def test_blocks_room_counts_bounds_power_and_footprints() -> None:

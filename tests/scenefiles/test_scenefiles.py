@@ -217,6 +217,8 @@ def test_bundled_scene_files_are_up_to_date(tmp_path: Path) -> None:
     assert module.main(["--out", str(tmp_path)]) == 0
     names = sorted(p.name for p in tmp_path.iterdir())
     assert names == [
+        "ball-box.mtl",
+        "ball-box.obj",
         "blocks-room.mtl",
         "blocks-room.obj",
         "cornell-box-uv.glb",
