@@ -240,20 +240,57 @@ def planar_contour_form_factor(start, end, points, normals, patch_normal, patch_
 
 
 def piecewise_contour_form_factor(
-    start, end, edge_ptr, piece_point, piece_normal, points, normals, margin
+    start, end, edge_ptr, piece_point, piece_normal, twin, points, normals, margin
 ):
     """Sum over planar pieces facing each receiver by more than ``margin`` of their
-    clipped outlines' factors (a folded patch, see :mod:`raytrad.core.contour`)."""
+    clipped outlines' factors (a folded patch, see :mod:`raytrad.core.contour`).
+
+    The pieces that face a receiver and lie wholly above its horizon are summed as one
+    region: their signed outline sums share a sign, and an edge between two of them is
+    walked once each way, so only the region's own outline is summed (edges whose
+    ``twin`` piece, relative to the first, is not in the region). The others that face
+    it straddle its horizon and are clipped one by one."""
     out = np.zeros(len(points))
+    count = len(piece_point)
+    state = np.zeros(count, dtype=np.int8)  # 0 not seen, 1 in the region, 2 clipped
+    base = edge_ptr[0]
     for i in range(len(points)):
         x, n = points[i], normals[i]
-        total = 0.0
-        for k in range(len(piece_point)):
+        for k in range(count):
             c, m = piece_point[k], piece_normal[k]
             front = (x[0] - c[0]) * m[0] + (x[1] - c[1]) * m[1] + (x[2] - c[2]) * m[2]
+            state[k] = 0
             if front > margin:
+                state[k] = 1
+                for e in range(edge_ptr[k], edge_ptr[k + 1]):
+                    h = (
+                        (start[e, 0] - x[0]) * n[0]
+                        + (start[e, 1] - x[1]) * n[1]
+                        + (start[e, 2] - x[2]) * n[2]
+                    )
+                    if h < 0.0:
+                        state[k] = 2
+                        break
+        total = 0.0
+        region = 0.0
+        for k in range(count):
+            if state[k] == 2:
                 total += clipped_outline(start, end, edge_ptr[k], edge_ptr[k + 1], x, n)
-        out[i] = total
+            elif state[k] == 1:
+                for e in range(edge_ptr[k], edge_ptr[k + 1]):
+                    t = twin[e - base]
+                    if 0 <= t < count and state[t] == 1:
+                        continue  # inside the region: its two ways cancel
+                    region += edge_term(
+                        start[e, 0] - x[0],
+                        start[e, 1] - x[1],
+                        start[e, 2] - x[2],
+                        end[e, 0] - x[0],
+                        end[e, 1] - x[1],
+                        end[e, 2] - x[2],
+                        n,
+                    )
+        out[i] = total + abs(region) / (2.0 * math.pi)
     return out
 
 

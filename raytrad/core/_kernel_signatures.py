@@ -109,6 +109,7 @@ SIGNATURES: dict[str, list[list[str]]] = {
             "Array(int64, 1, 'C', False, aligned=True)",
             "Array(float64, 2, 'C', False, aligned=True)",
             "Array(float64, 2, 'C', False, aligned=True)",
+            "Array(int64, 1, 'C', False, aligned=True)",
             "Array(float64, 2, 'C', False, aligned=True)",
             "Array(float64, 2, 'C', False, aligned=True)",
             "float64",

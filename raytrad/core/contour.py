@@ -22,6 +22,14 @@ Per triangle (:func:`~raytrad.core.kernels.numpy_facing_triangle_sums`) the stra
 costs the patch's triangle count per receiver, which grows with refinement: the pairs'
 cost grew as receivers squared over patches. On the outline it stays put.
 
+* :func:`piecewise_contour_form_factor`: a folded patch (a warped quad, a patch of a
+  curved surface), piece by planar piece (a piece per scene triangle), each piece seen
+  from its front only and clipped to the horizon. The compiled loop sums the pieces
+  that face the receiver and lie wholly above its horizon as one region, on the
+  region's own outline: their signed sums share a sign, and an edge between two of them
+  is walked once each way. A ball's patch of 512 triangles, seen from the floor beside
+  it, then costs the edges around its lit part, not three per triangle.
+
 Both run compiled (:mod:`raytrad.core.compiled`) when available; the ``numpy_`` twins
 are the reference the tests compare them with.
 
@@ -147,6 +155,7 @@ def piecewise_contour_form_factor(
         np.ascontiguousarray(pieces.edge_ptr[lo : hi + 1], dtype=np.int64),
         _f64(pieces.point[lo:hi]),
         _f64(pieces.normal[lo:hi]),
+        pieces.twin_piece[pieces.edge_ptr[lo] : pieces.edge_ptr[hi]] - lo,
         _f64(points),
         _f64(normals),
         float(margin),

@@ -93,6 +93,10 @@ class Pieces:
         A corner of each piece [m] and its unit normal.
     patch_ptr : (P + 1,) int64
         CSR pointers into the pieces by patch (none for planar patches).
+    twin_piece : (E,) int64
+        For each edge, the piece of the same patch that has the same edge the other way
+        (its neighbour across it), or -1: the patch's outline, or a neighbour whose
+        edges run there in other pieces.
     """
 
     start: np.ndarray
@@ -101,6 +105,7 @@ class Pieces:
     point: np.ndarray
     normal: np.ndarray
     patch_ptr: np.ndarray
+    twin_piece: np.ndarray
 
 
 def folded_pieces(mesh: RadiosityMesh) -> Pieces:
@@ -115,6 +120,7 @@ def folded_pieces(mesh: RadiosityMesh) -> Pieces:
     start, end, edge_ptr = boundary_edges(mesh, labels, len(distinct))
     own = np.flatnonzero(folded)[first]  # a triangle of each piece
     piece_patch = mesh.triangle_patch[own]
+    edge_piece = np.repeat(np.arange(len(distinct)), np.diff(edge_ptr))
     return Pieces(
         start,
         end,
@@ -122,7 +128,34 @@ def folded_pieces(mesh: RadiosityMesh) -> Pieces:
         mesh.positions[mesh.triangles[own, 0]],
         mesh.triangle_normal[own],
         np.searchsorted(piece_patch, np.arange(mesh.patch_count + 1)),
+        _twin_pieces(start, end, edge_piece, piece_patch[edge_piece]),
     )
+
+
+def _twin_pieces(
+    start: np.ndarray, end: np.ndarray, piece: np.ndarray, patch: np.ndarray
+) -> np.ndarray:
+    """(E,) for each edge the piece whose edge of the same patch runs exactly the other way
+    (the same two points, bit for bit), or -1."""
+    forward = np.concatenate([patch[:, None], start, end], axis=1)
+    backward = np.concatenate([patch[:, None], end, start], axis=1)
+    both = np.concatenate([forward, backward])
+    order = np.lexsort(both.T[::-1])
+    ranked = both[order]
+    same = np.zeros(len(both), dtype=bool)
+    same[1:] = (ranked[1:] == ranked[:-1]).all(axis=1)
+    group = np.cumsum(~same) - 1
+    label = np.empty(len(both), dtype=np.int64)
+    label[order] = group
+    count = len(start)
+    # an edge's backward key meets another edge's forward key: that edge is its twin
+    owner = np.full(int(group[-1]) + 1 if count else 0, -1, dtype=np.int64)
+    owner[label[:count]] = np.arange(count)  # (a forward key held twice: the last wins)
+    twin = owner[label[count:]]
+    out = np.full(count, -1, dtype=np.int64)
+    found = twin >= 0
+    out[found] = piece[twin[found]]
+    return out
 
 
 def _merge_collinear(

@@ -215,7 +215,8 @@ def numpy_subarea_spread(
     kept = np.where(share > 0, raw, 0.0)
     seen = kept.sum(axis=1)
     kept *= np.divide(raw.sum(axis=1), seen, out=np.zeros_like(seen), where=seen > 0)[:, None]
-    total = np.bincount(t_element, weights=kept.sum(axis=1), minlength=len(near))
+    # (numpy's bincount of no items is int64 even with weights: float64 asked for)
+    total = np.bincount(t_element, weights=kept.sum(axis=1), minlength=len(near)).astype(float)
     total += np.bincount(c_element, weights=c_raw, minlength=len(near))
     # seeing none of it: the sampled weight by visible area
     scale = sub_weight[near] / np.where(

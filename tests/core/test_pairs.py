@@ -15,7 +15,7 @@ from raytrad.core.kernels import numpy_facing_triangle_sums
 from raytrad.core.mesh import MeshSettings, RadiosityMesh, build_mesh
 from raytrad.core.pairs import PairFactors
 from raytrad.core.pipeline import Prepared
-from raytrad.scene.builder import quads_scene
+from raytrad.scene.builder import SceneBuilder, box_faces, icosphere, quads_scene
 
 #: Agreement asked of the outline and the triangle sums (rounding over ~100 triangles).
 AGREE = 1e-12
@@ -73,6 +73,59 @@ def test_strongly_folded_quad_matches_the_triangle_sum(lift: float) -> None:
     assert len(folded) >= 2
     assert np.bincount(mesh.triangle_patch)[folded].min() > 20  # refined: many triangles
     assert _check_patches(mesh, np.arange(mesh.patch_count), seed=2) > 0.2
+
+
+def _ball_mesh() -> RadiosityMesh:
+    """A ball of 320 triangles in a box: a curved surface, whose patches are folded and
+    hold a piece per scene triangle."""
+    builder = SceneBuilder()
+    builder.material("grey", 0.5)
+    unit, triangles = icosphere(2)
+    for tri in triangles:
+        builder.triangle(0.5 * unit[tri], "grey")
+    for name, corners, outward in box_faces((-1.0, -1.0, -1.0), (1.0, 1.0, 1.0)):
+        builder.quad(corners, "grey", -np.asarray(outward), name)
+    return build_mesh(builder.build(), MeshSettings(receivers=3000, patches=150))
+
+
+def _seen_whole(mesh: RadiosityMesh, patch: int, x: np.ndarray, n: np.ndarray) -> np.ndarray:
+    """(C,) whether every triangle of the patch faces x and lies above its horizon,
+    measured on the triangles (the outline's shortcut applies there)."""
+    tri = np.flatnonzero(mesh.triangle_patch == patch)
+    corners = mesh.positions[mesh.triangles[tri]]
+    faces = np.einsum("ctj,tj->ct", x[:, None, :] - corners[None, :, 0], mesh.triangle_normal[tri])
+    above = np.einsum("cvj,cj->cv", corners.reshape(-1, 3)[None] - x[:, None], n)
+    return (faces > 1e-9).all(axis=1) & (above >= 0).all(axis=1)
+
+
+def test_ball_patches_match_the_triangle_sum_seen_whole_or_not(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """A ball's folded patches (a piece per scene triangle) against the triangle sum,
+    from probes that see some patches whole (the outline's shortcut) and others in part
+    (piece by piece): compiled and numpy alike."""
+    mesh = _ball_mesh()
+    folded = np.flatnonzero(~mesh.patch_planar)
+    assert len(folded) >= 10
+    pairs = PairFactors(mesh, None, float(np.linalg.norm(np.ptp(mesh.positions, axis=0))))
+    x, n = _probes(mesh, np.random.default_rng(6), 300)
+    outside = np.linalg.norm(x, axis=1) > 0.55
+    x, n = x[outside], n[outside]
+    whole = parts = 0
+    results = []
+    for patch in folded:
+        got = pairs._unoccluded(x, n, int(patch))
+        want = _triangle_truth(pairs, int(patch), x, n)
+        np.testing.assert_allclose(got, want, rtol=0, atol=AGREE)
+        seen = _seen_whole(mesh, int(patch), x, n)
+        whole += int(seen.sum())
+        parts += int(((want > 0) & ~seen).sum())
+        results.append(got)
+    assert whole > 200 and parts > 200, (whole, parts)
+    monkeypatch.setenv("RAYTRAD_KERNELS", "numpy")
+    assert compiled.get() is None
+    for patch, got in zip(folded, results, strict=True):
+        np.testing.assert_allclose(pairs._unoccluded(x, n, int(patch)), got, rtol=0, atol=AGREE)
 
 
 @pytest.mark.skipif(compiled.get() is None, reason="needs the compiled kernels")

@@ -13,6 +13,7 @@ from raytrad.core import clusters, compiled
 from raytrad.core.gather import subarea_triangles
 from raytrad.core.mesh import MeshSettings, RadiosityMesh, build_mesh
 from raytrad.core.spread import (
+    MIDPOINT_SIZES,
     GatherShares,
     corner_form_factors,
     numpy_subarea_spread,
@@ -70,6 +71,45 @@ def test_compiled_subarea_spread_matches_numpy(mesh: RadiosityMesh) -> None:
         handed = np.isin(slow[1] - base, nodes)
         kinds += [handed.sum(), ((slow[1] >= base) & ~handed).sum(), (slow[1] < base).sum()]
     assert kinds.min() > 20, kinds
+
+
+def test_a_near_receiver_whose_cut_has_no_leaf_spreads_over_clusters(
+    mesh: RadiosityMesh,
+) -> None:
+    """A receiver near a sub-area (within its node's reach) but far enough in the sizes of
+    its clusters that its cut takes only clusters whole, walking no triangle: numpy's
+    ``bincount`` of no triangles is int64 even with weights, and the reference's sums
+    once failed on it (a scene with tessellated balls, in the benchmark's numpy pass)."""
+    shares = GatherShares(mesh, *subarea_triangles(mesh))
+    tree = shares.tree
+    found = []
+    for s in range(mesh.subarea_count):
+        node = tree.root[s]
+        for lift in np.linspace(0.01, 1.5, 60):
+            point = mesh.subarea_point[s] + lift * mesh.subarea_normal[s]
+            if np.linalg.norm(point - tree.point[node]) > shares.node_reach[node]:
+                continue
+            _, item = tree.cuts(np.array([node]), point[None], MIDPOINT_SIZES)
+            if (item >= 0).all():
+                found.append((node, point, -mesh.subarea_normal[s]))
+                break
+    assert found, "no such receiver in this patching"
+    nodes = np.array([f[0] for f in found])
+    points = np.array([f[1] for f in found])
+    normals = np.array([f[2] for f in found])
+    weight = np.linspace(0.5, 1.0, len(found))
+    count = len(found)
+    slow = numpy_subarea_spread(np.arange(count), nodes, weight, points, normals, shares)
+    assert (slow[1] >= mesh.receiver_count).all()  # clusters (and nodes) only
+    assert np.isfinite(slow[2]).all() and (slow[2] >= 0).all() and slow[2].sum() > 0
+    if compiled.get() is not None:
+        fast = subarea_spread(np.arange(count), nodes, weight, points, normals, shares)
+        stride = mesh.receiver_count + tree.count
+        totals = [
+            np.bincount(p * stride + s, weights=w, minlength=count * stride)
+            for p, s, w in (fast, slow)
+        ]
+        np.testing.assert_allclose(totals[0], totals[1], rtol=1e-12, atol=1e-15)
 
 
 def test_clusters_spread_a_linear_radiosity_as_the_triangles_do(
