@@ -59,6 +59,7 @@ import numpy as np
 from raytrad.arrays import unique
 from raytrad.constants import tol
 from raytrad.core import compiled
+from raytrad.core.refine import connected_labels
 from raytrad.core.shafts import plane_hull, prism
 from raytrad.scene.model import triangle_areas_normals
 
@@ -67,9 +68,9 @@ log = logging.getLogger(__name__)
 #: Plane kinds: a solid's face, a solid's hole (its open planar loop), a sheet's plane,
 #: and a sheet's edge (perpendicular to its plane, outward).
 FACE, HOLE, SHEET, EDGE = 0, 1, 2, 3
-#: Components with more triangles than this are not considered (the blockers are sought
-#: only where shaft culling runs, among at most a few hundred planar facets).
-MAX_TRIANGLES = 20_000
+#: Scenes of more blocking triangles than this are not searched for blockers (welding
+#: their corners and labelling their components costs about a second per million).
+MAX_TRIANGLES = 200_000
 #: Convex components of more planes than this are not considered: every pair in doubt
 #: tests each plane, and a tessellated ball (1 280 planes) cost more than its rays
 #: (2026-12-03: a box with such a ball took 1.92 times the pass without blockers).
@@ -275,20 +276,13 @@ MARGIN = 2.0
 
 
 def _components(triangles: np.ndarray, vertex_count: int) -> list[np.ndarray]:
-    """Triangle indices of each connected component (sharing a vertex)."""
-    parent = np.arange(vertex_count)
-
-    def root(i: int) -> int:
-        while parent[i] != i:
-            parent[i] = parent[parent[i]]
-            i = int(parent[i])
-        return i
-
-    for a, b, c in triangles.tolist():
-        ra, rb, rc = root(a), root(b), root(c)
-        top = min(ra, rb, rc)
-        parent[ra] = parent[rb] = parent[rc] = top
-    label = np.array([root(i) for i in triangles[:, 0].tolist()])
+    """Triangle indices of each connected component (sharing a vertex), in order of
+    their lowest vertex."""
+    joined = np.concatenate([triangles[:, [0, 1]], triangles[:, [1, 2]]])
+    vertex_label = connected_labels(vertex_count, joined)
+    lowest = np.full(int(vertex_label.max(initial=-1)) + 1, vertex_count)
+    np.minimum.at(lowest, vertex_label, np.arange(vertex_count))
+    label = lowest[vertex_label[triangles[:, 0]]]
     order = np.argsort(label, kind="stable")
     cuts = np.flatnonzero(np.diff(label[order])) + 1
     return np.split(order, cuts)

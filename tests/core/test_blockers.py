@@ -64,6 +64,19 @@ def test_convex_components_of_many_planes_are_left_out() -> None:
     assert both.count == 1 and np.allclose(both.center[0], [3.0, 0, 0])
 
 
+def test_a_box_beside_a_finely_tessellated_ball_is_still_a_blocker() -> None:
+    """A ball of 20 480 triangles (once past the scene's cap, which left the box out
+    too) leaves the box its blocker, as it is alone."""
+    ball = icosphere(5)
+    assert len(ball[1]) > 20_000
+    solid = box(np.array([3.0, 0, 0]), np.ones(3))
+    found = bl.blockers(*join(ball, solid), DIAGONAL)
+    alone = bl.blockers(*solid, DIAGONAL)
+    assert found is not None and found.count == 1
+    np.testing.assert_array_equal(found.normal, alone.normal)
+    np.testing.assert_array_equal(found.offset, alone.offset)
+
+
 def test_non_convex_components_block_nothing() -> None:
     l_walls = join(
         quad_triangles([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]]),
