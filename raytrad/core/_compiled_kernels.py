@@ -249,13 +249,20 @@ def piecewise_contour_form_factor(
     region: their signed outline sums share a sign, and an edge between two of them is
     walked once each way, so only the region's own outline is summed (edges whose
     ``twin`` piece, relative to the first, is not in the region). The others that face
-    it straddle its horizon and are clipped one by one."""
+    it straddle its horizon and are clipped one by one. A receiver whose horizon the
+    patch stays within ``margin`` of, or below, gets 0."""
     out = np.zeros(len(points))
     count = len(piece_point)
     state = np.zeros(count, dtype=np.int8)  # 0 not seen, 1 in the region, 2 clipped
     base = edge_ptr[0]
     for i in range(len(points)):
         x, n = points[i], normals[i]
+        level = x[0] * n[0] + x[1] * n[1] + x[2] * n[2]
+        top = -np.inf
+        for e in range(base, edge_ptr[count]):
+            top = max(top, start[e, 0] * n[0] + start[e, 1] * n[1] + start[e, 2] * n[2] - level)
+        if not top > margin:
+            continue
         for k in range(count):
             c, m = piece_point[k], piece_normal[k]
             front = (x[0] - c[0]) * m[0] + (x[1] - c[1]) * m[1] + (x[2] - c[2]) * m[2]

@@ -180,12 +180,32 @@ def numpy_piecewise_contour_form_factor(
     points, normals : (C, 3) float64
         Receiver positions [m] and unit normals.
     margin : float
-        Height in front of a piece's plane below which it is not seen [m].
+        Height in front of a piece's plane below which it is not seen, and above the
+        receiver's horizon that some corner must reach for the patch to count [m].
 
     Returns
     -------
     (C,) float64 form factors [1].
     """
+    out = np.zeros(len(points))
+    # a patch within ``margin`` of the horizon or below it (its heights are extreme at its
+    # pieces' outlines' corners) gives nothing
+    first, last = pieces.patch_ptr[patch], pieces.patch_ptr[patch + 1]
+    corners = pieces.start[pieces.edge_ptr[first] : pieces.edge_ptr[last]]
+    top = (corners @ normals.T).max(axis=0, initial=-np.inf) - np.einsum(
+        "cj,cj->c", points, normals
+    )
+    seen = top > margin
+    if seen.any():
+        out[seen] = _numpy_pieces(pieces, patch, points[seen], normals[seen], margin)
+    return out
+
+
+def _numpy_pieces(
+    pieces: Pieces, patch: int, points: np.ndarray, normals: np.ndarray, margin: float
+) -> np.ndarray:
+    """(C,) the sum over the patch's pieces facing each point by more than ``margin`` of
+    their horizon-clipped outlines' factors [1]."""
     out = np.zeros(len(points))
     for k in range(pieces.patch_ptr[patch], pieces.patch_ptr[patch + 1]):
         front = (points - pieces.point[k]) @ pieces.normal[k] > margin

@@ -369,16 +369,7 @@ class PairFactors:
                 m.patch_center[patch],
                 band,
             )
-        # a folded patch's heights are extreme at its pieces' outlines' corners
-        pieces = self._pieces
-        first, last = pieces.patch_ptr[patch], pieces.patch_ptr[patch + 1]
-        verts = pieces.start[pieces.edge_ptr[first] : pieces.edge_ptr[last]]
-        top = (verts @ nx.T).max(axis=0) - np.einsum("cj,cj->c", x, nx)
-        out = np.zeros(len(x))
-        seen = top > band
-        if seen.any():
-            out[seen] = piecewise_contour_form_factor(pieces, patch, x[seen], nx[seen], band)
-        return out
+        return piecewise_contour_form_factor(self._pieces, patch, x, nx, band)
 
     def _triangle_factors(self, x: np.ndarray, nx: np.ndarray, tri: np.ndarray) -> np.ndarray:
         """Exact clipped factors to triangles whose lit side faces the receiver, else 0."""
