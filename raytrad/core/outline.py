@@ -136,7 +136,9 @@ def _twin_pieces(
     start: np.ndarray, end: np.ndarray, piece: np.ndarray, patch: np.ndarray
 ) -> np.ndarray:
     """(E,) for each edge the piece whose edge of the same patch runs exactly the other way
-    (the same two points, bit for bit), or -1."""
+    (the same two points, bit for bit), or -1. Only pairs that match one to one count: an
+    edge three pieces meet at (a non-manifold fold) gets no twin, so that the region sum
+    skips only edges whose two ways both drop out."""
     forward = np.concatenate([patch[:, None], start, end], axis=1)
     backward = np.concatenate([patch[:, None], end, start], axis=1)
     both = np.concatenate([forward, backward])
@@ -148,13 +150,18 @@ def _twin_pieces(
     label = np.empty(len(both), dtype=np.int64)
     label[order] = group
     count = len(start)
-    # an edge's backward key meets another edge's forward key: that edge is its twin
-    owner = np.full(int(group[-1]) + 1 if count else 0, -1, dtype=np.int64)
-    owner[label[:count]] = np.arange(count)  # (a forward key held twice: the last wins)
+    groups = int(group[-1]) + 1 if count else 0
+    # an edge's backward key meets another edge's forward key: that edge is its twin,
+    # when it is the only edge with that forward key
+    owner = np.full(groups, -1, dtype=np.int64)
+    owner[label[:count]] = np.arange(count)
+    forwards = np.bincount(label[:count], minlength=groups)
+    owner[forwards != 1] = -1
     twin = owner[label[count:]]
+    mutual = twin >= 0
+    mutual[mutual] = twin[twin[mutual]] == np.flatnonzero(mutual)
     out = np.full(count, -1, dtype=np.int64)
-    found = twin >= 0
-    out[found] = piece[twin[found]]
+    out[mutual] = piece[twin[mutual]]
     return out
 
 
