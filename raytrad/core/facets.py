@@ -18,6 +18,7 @@ import logging
 import numpy as np
 
 from raytrad.constants import tol
+from raytrad.core.refine import cluster_bounds
 from raytrad.core.shafts import Facets, plane_hull
 
 log = logging.getLogger(__name__)
@@ -88,11 +89,11 @@ def facets(positions: np.ndarray, triangles: np.ndarray, diagonal: float) -> Fac
     group, n, d = _planar_groups(corners, normal, diagonal)
     count = len(d)
     flat = tol.horizon * diagonal
-    lo, hi = _group_bounds(corners, group, count)
+    lo, hi = _corner_bounds(corners, group, count)
     center = 0.5 * (lo + hi)
     radius = _group_radius(corners, group, center, count)
     planar = np.ones(count, dtype=bool)
-    volume = np.zeros(count, dtype=np.int64)
+    volume = np.full(count, -1, dtype=np.int64)
     if count > MAX_FACETS:
         if np.count_nonzero(radius >= LARGE_FACET * diagonal) > KEPT_FACETS:
             log.debug("%d facets, more than %d of them large: no shaft culling", count, KEPT_FACETS)
@@ -113,7 +114,7 @@ def facets(positions: np.ndarray, triangles: np.ndarray, diagonal: float) -> Fac
         # a triangle's volume: its facet's; the triangles of kept facets have none (-1)
         of_triangle = np.where(planar[group], -1, volume[group])
         inside = of_triangle >= 0
-        v_lo, v_hi = _group_bounds(corners[inside], of_triangle[inside], volumes)
+        v_lo, v_hi = _corner_bounds(corners[inside], of_triangle[inside], volumes)
         v_center = 0.5 * (v_lo + v_hi)
         normals.append(np.zeros((volumes, 3)))
         offsets.append(np.zeros(volumes))
@@ -164,14 +165,12 @@ def _planar_groups(
     return group, normal[first], offset[first]
 
 
-def _group_bounds(
+def _corner_bounds(
     corners: np.ndarray, group: np.ndarray, count: int
 ) -> tuple[np.ndarray, np.ndarray]:
-    """(count, 3) lower and upper corners of each group's triangles' bounding box [m]."""
-    lo = np.full((count, 3), np.inf)
-    hi = np.full((count, 3), -np.inf)
-    np.minimum.at(lo, group, corners.min(axis=1))
-    np.maximum.at(hi, group, corners.max(axis=1))
+    """(count, 3) lower and upper corners of each group's triangles' bounding box [m]
+    (:func:`~raytrad.core.refine.cluster_bounds` of the triangles' corners)."""
+    lo, hi = cluster_bounds(corners.reshape(-1, 3), np.repeat(group, 3), count)
     return lo, hi
 
 
