@@ -24,12 +24,12 @@ log = logging.getLogger("raytrad")
 __all__ = ["build_parser", "main"]
 
 
-def _verify(directory: Path) -> int:
-    problems = api.verify_outputs(directory)
+def _verify(directory: Path, finished: bool) -> int:
+    problems = api.verify_outputs(directory, finished=finished)
     for problem in problems:
         print(f"raytrad: {problem}", file=sys.stderr)
     if not problems:
-        print(f"{directory}: complete and consistent")
+        print(f"{directory}: complete and consistent{', finished' if finished else ''}")
     return 1 if problems else 0
 
 
@@ -253,7 +253,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     if args.command == "verify":
-        return _verify(args.directory)
+        return _verify(args.directory, args.finished)
     level = logging.DEBUG if args.verbose else logging.WARNING if args.quiet else logging.INFO
     logging.basicConfig(level=level, format="raytrad: %(levelname)s: %(message)s")
     logging.getLogger("trimesh").setLevel(logging.ERROR)

@@ -224,6 +224,13 @@ def build_parser() -> argparse.ArgumentParser:
         "signal, or old and new files side by side).",
     )
     verify.add_argument("directory", type=Path, metavar="DIR")
+    verify.add_argument(
+        "--finished",
+        action="store_true",
+        help="also exit 1 when the run stopped before its tolerance (--time-limit, "
+        "--max-shots, or refinement cut short): a whole set of the best answer it had, "
+        "with a checkpoint to --resume",
+    )
     _add_bake(sub)
     return parser
 

@@ -26,6 +26,9 @@ from raytrad.scenefiles import SceneFile
 from raytrad.settings import RenderSettings
 
 MANIFEST = "raytrad-run.json"
+#: Solve stop reasons of a run that ended on a budget before its tolerance (with a
+#: checkpoint to resume): ``raytrad verify --finished`` fails such a set.
+EARLY_STOPS = ("time-limit", "max-shots")
 
 
 def invalidate(output_dir: Path) -> None:
@@ -127,17 +130,26 @@ def complete_set_key(directory: str | os.PathLike[str]) -> str | None:
     return key if isinstance(key, str) else None
 
 
-def verify_outputs(directory: str | os.PathLike[str]) -> list[str]:
+def verify_outputs(directory: str | os.PathLike[str], finished: bool = False) -> list[str]:
     """What is wrong with the output set in ``directory``; empty when it is complete and
     consistent (every file the manifest lists is there with its size and hash).
+
+    Parameters
+    ----------
+    directory : path
+    finished : bool
+        Also count a run that ended before its tolerance as a problem: stopped by
+        ``--time-limit`` or ``--max-shots``, or with its refinement cut short, it is a
+        whole set of the best answer it had, and it left a checkpoint for ``--resume``.
+        Without this such a set verifies (it is what the budget asked for).
 
     Returns
     -------
     list of str
         One line per problem: no manifest (a run killed while writing, or none), an
         unreadable manifest, a run stopped by Ctrl-C or a signal (its outputs are the
-        solution so far), a listed file missing, or one whose size or hash differs (a
-        mixed set).
+        solution so far), with ``finished`` a run that stopped early, a listed file
+        missing, or one whose size or hash differs (a mixed set).
     """
     directory = Path(directory)
     path = directory / MANIFEST
@@ -157,6 +169,11 @@ def verify_outputs(directory: str | os.PathLike[str]) -> list[str]:
             f"{path}: the run was interrupted (Ctrl-C or a signal): its outputs are the "
             "solution so far; resume it to finish"
         )
+    elif finished and (early := _early_stop(manifest)):
+        problems.append(
+            f"{path}: the run stopped before its tolerance ({early}): its outputs are the "
+            "best answer it had; render again with --resume to finish"
+        )
     for name, entry in sorted(files.items()):
         file = directory / name
         if not file.is_file():
@@ -164,3 +181,17 @@ def verify_outputs(directory: str | os.PathLike[str]) -> list[str]:
         elif file.stat().st_size != entry.get("bytes") or _sha256(file) != entry.get("sha256"):
             problems.append(f"{file}: differs from the run that wrote the manifest (mixed set)")
     return problems
+
+
+def _early_stop(manifest: dict[str, Any]) -> str | None:
+    """How a run ended before its tolerance (its solve stopped on a budget, or it kept a
+    checkpoint to resume: its refinement was cut short), or None when it did not."""
+    reasons = []
+    if manifest.get("stop_reason") in EARLY_STOPS:
+        reasons.append(str(manifest["stop_reason"]))
+    files = manifest.get("files")
+    if isinstance(files, dict) and any(
+        isinstance(entry, dict) and entry.get("key") == "checkpoint" for entry in files.values()
+    ):
+        reasons.append("a checkpoint kept to resume")
+    return ", ".join(reasons) or None

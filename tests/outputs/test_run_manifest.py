@@ -87,3 +87,46 @@ def test_a_run_stopped_by_a_signal_does_not_verify_until_resumed(
     assert status == 1 and "interrupted" in err
     api.render(SCENES / "cornell-box.obj", tmp_path, settings, resume=True)
     assert verify_outputs(tmp_path) == []
+
+
+def test_finished_fails_a_run_stopped_on_a_budget_until_resumed(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A run stopped by --max-shots (as by --time-limit) is a whole set of its best answer:
+    plain verify passes it, ``--finished`` does not until a resumed run reaches the
+    tolerance."""
+    _render(tmp_path, capsys, "--max-shots", "3")
+    manifest = json.loads((tmp_path / MANIFEST).read_text())
+    assert manifest["stop_reason"] == "max-shots"
+    assert "checkpoint" in {entry["key"] for entry in manifest["files"].values()}
+    assert verify_outputs(tmp_path) == []
+    (problem,) = verify_outputs(tmp_path, finished=True)
+    assert "before its tolerance (max-shots" in problem and "--resume" in problem
+    status, _, err = run_cli(["verify", str(tmp_path), "--finished"], capsys)
+    assert status == 1 and "max-shots" in err
+    _render(tmp_path, capsys, "--resume")
+    assert json.loads((tmp_path / MANIFEST).read_text())["stop_reason"] == "converged"
+    status, out, _ = run_cli(["verify", str(tmp_path), "--finished"], capsys)
+    assert status == 0 and "finished" in out
+
+
+def test_finished_fails_a_set_that_keeps_a_checkpoint(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A solve that converged with its refinement cut short keeps a checkpoint to resume:
+    not finished, although its stop reason is "converged"."""
+    import hashlib
+
+    _render(tmp_path, capsys)
+    checkpoint = tmp_path / "cornell-box.checkpoint.npz"
+    checkpoint.write_bytes(b"state")
+    manifest = json.loads((tmp_path / MANIFEST).read_text())
+    manifest["files"][checkpoint.name] = {
+        "key": "checkpoint",
+        "bytes": 5,
+        "sha256": hashlib.sha256(b"state").hexdigest(),
+    }
+    (tmp_path / MANIFEST).write_text(json.dumps(manifest))
+    assert verify_outputs(tmp_path) == []
+    (problem,) = verify_outputs(tmp_path, finished=True)
+    assert "(a checkpoint kept to resume)" in problem
