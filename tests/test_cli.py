@@ -427,6 +427,12 @@ def test_time_limit_bounds_the_form_factor_pass(
     assert report["refinement"]["receivers_interpolated"] == 0
     assert "refined    nothing: the time limit or an interrupt came first" in summary
     assert "form-factor pass stopped after" in caplog.text
+    # a few shots: the residual check's number is the larger, but it counts the unfinished
+    # solve, so the algebraic part is named, and the summary says why
+    error = report["error"]
+    assert error["dominant"] == "algebraic"
+    assert max(error["parts"]["discretisation"]) > max(error["parts"]["algebraic"])
+    assert "the discretisation check counts the unfinished solve too" in summary
     solve = report["solve"]
     assert solve["stop_reason"] == "time-limit"
     # every lamp patch shot once, nothing else: the lamp is a few patches of 80

@@ -127,6 +127,7 @@ def test_stopped_report_matches_the_schema(
     _validate(schema, report)
     assert report["solve"]["stop_reason"] == "max-shots"
     assert "checkpoint" in report["outputs"]
+    assert report["timings_seconds"]["checkpoint"] > 0  # its writing counts in the total
 
 
 def test_stopped_report_is_strict_json(stopped_run: tuple[Path, dict[str, Any]]) -> None:
@@ -182,6 +183,7 @@ def test_energy_ledger_balances(
 
 def test_timings_name_every_stage(furnace_run: tuple[Path, dict[str, Any]]) -> None:
     timings = furnace_run[1]["timings_seconds"]
+    assert "checkpoint" not in timings  # a finished run keeps none
     assert {"load", "acceleration", "mesh", "solve", "write", "reference"} <= set(timings)
     assert set(timings) <= {
         "load",
@@ -194,6 +196,7 @@ def test_timings_name_every_stage(furnace_run: tuple[Path, dict[str, Any]]) -> N
         "refine",
         "error",
         "write",
+        "checkpoint",
     }
     assert all(isinstance(v, float) and v >= 0 for v in timings.values())
 
