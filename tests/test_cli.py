@@ -343,6 +343,13 @@ def test_a_time_limited_refinement_resumes_without_pass_or_solve(
     summary = capsys.readouterr().out
     assert f"{cut['receivers_interpolated']} of them interpolated" in summary
     assert f"+{cut['receivers_added']} receivers in 0 rounds and one cut short" in summary
+    # the scene line counts every receiver baked, and says how many were solved
+    receivers = first.report["statistics"]["receivers"]
+    assert receivers == cut["receivers_solved"] + cut["receivers_added"]
+    assert (
+        f"{receivers} receivers ({cut['receivers_solved']} solved, the rest added by "
+        "refinement)" in summary
+    )
     second = api.render(scene, out, settings, resume=True)
     resumed = second.report["resumed"]
     assert resumed["form_factor_columns"] == first.prepared.mesh.patch_count
@@ -426,6 +433,7 @@ def test_time_limit_bounds_the_form_factor_pass(
     assert report["refinement"]["receivers_added"] == 0
     assert report["refinement"]["receivers_interpolated"] == 0
     assert "refined    nothing: the time limit or an interrupt came first" in summary
+    assert "solved, the rest added" not in summary  # nothing was added
     assert "form-factor pass stopped after" in caplog.text
     # a few shots: the residual check's number is the larger, but it counts the unfinished
     # solve, so the algebraic part is named, and the summary says why

@@ -193,11 +193,19 @@ def _named_below(error: dict[str, Any]) -> str:
     return ""
 
 
+def _solved(report: dict[str, Any]) -> str:
+    """`` (N solved, the rest from refinement)`` when refinement added receivers."""
+    refinement = report.get("refinement") or {}
+    if not refinement.get("receivers_added"):
+        return ""
+    return f" ({refinement['receivers_solved']} solved, the rest added by refinement)"
+
+
 def _print_summary(report: dict[str, Any], outputs: dict[str, Path]) -> None:
     s, stats, t = report["solve"], report["statistics"], report["timings_seconds"]
     total = sum(t.values())
     lines = [
-        f"scene      {report['scene']}: {stats['receivers']} receivers, "
+        f"scene      {report['scene']}: {stats['receivers']} receivers{_solved(report)}, "
         f"{stats['patches']} patches, {stats['subareas']} sample points",
         f"solve      {s['method']}: {s['stop_reason']} after {s['shots']} shots, "
         f"residual {s['residual']:.2e}",
