@@ -149,8 +149,8 @@ def solve_scene(
 def refine(
     prepared: Prepared, result: SolveResult, settings: RenderSettings, stop: StopPoll = None
 ) -> tuple[Prepared, SolveResult, Refinement]:
-    """Adaptive refinement of a solve: the refined mesh and radiosity (in copies of
-    ``prepared``, ``result``) and what was done (:func:`raytrad.core.pipeline.refine_solution`)."""
+    """Adaptive refinement: the refined copies of ``prepared`` and ``result``, and what was
+    done (:func:`raytrad.core.pipeline.refine_solution`)."""
     return pipeline.refine_solution(prepared, result, settings.refine, stop)
 
 

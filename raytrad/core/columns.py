@@ -151,6 +151,7 @@ class ColumnSpill:
             self._folder.cleanup()
             self._folder = None
         self._paths.clear()
+        self.bytes = 0
 
 
 def return_freed_memory() -> None:

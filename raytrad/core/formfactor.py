@@ -10,10 +10,8 @@ against its distance; it underestimates near, oblique receivers. So a sub-area c
 :data:`NEAR_FACTOR` times its size is evaluated exactly instead: each of its triangles gets
 the closed-form Lambert point-to-polygon factor, clipped to the receiver's horizon, times
 the visibility of the triangle's centroid. Near and far receivers therefore both get the
-unoccluded factor to within a fraction of a percent, at a cost that stays bounded.
-
-Pairs that cannot exchange light (receiver behind the patch, patch below the receiver's
-horizon) cost no ray.
+unoccluded factor to within a fraction of a percent, at a cost that stays bounded. Pairs
+that cannot exchange light (receiver behind the patch, patch below its horizon) cost no ray.
 """
 
 from __future__ import annotations
@@ -190,6 +188,11 @@ class FormFactorEngine:
         self._spill.close()
         return_freed_memory()
 
+    @property
+    def held_bytes(self) -> int:
+        """Bytes of the columns held, cached and spilled: what a checkpoint writes [B]."""
+        return self._cached_bytes + self._spill.bytes
+
     def column(self, patch: int) -> Column:
         """F(receiver <- patch) for every receiver that can see it (balanced, see
         :meth:`balance`, once that has run), in float64."""
@@ -288,8 +291,7 @@ class FormFactorEngine:
 
     def restore_columns(self, packed: dict[str, np.ndarray]) -> int:
         """Cache the columns :meth:`pass_columns` packed (a resumed pass computes only the
-        others) and return how many; their rays were cast by the earlier run and are not
-        counted again."""
+        others) and return how many; their rays (the earlier run's) are not counted again."""
         restored = unpack_columns(packed, self._index)
         for patch, col in restored:
             self._store(patch, col)
@@ -478,9 +480,8 @@ class FormFactorEngine:
         nx: np.ndarray | None = None,
         levels: np.ndarray | None = None,
     ) -> np.ndarray:
-        """Receivers (or points ``x`` with normals ``nx``, and ``levels`` their heights
-        along them if known) that may exchange light with ``patch`` (cheap conservative
-        culling)."""
+        """Receivers (or points ``x`` with normals ``nx``, ``levels`` their heights along
+        them if known) that may exchange light with ``patch`` (cheap, conservative)."""
         m = self.mesh
         if x is None or nx is None:
             x, nx, levels = self._points, m.receiver_normal, self._levels
@@ -612,8 +613,7 @@ class FormFactorEngine:
 
         Returns
         -------
-        (N,) float64 form factors [1]; rays start ``tol.ray_offset`` x the scene diagonal
-        along the normal.
+        (N,) float64 form factors [1]; rays start ``tol.ray_offset`` x diagonal off them.
         """
         points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
         normals = np.asarray(normals, dtype=np.float64).reshape(-1, 3)

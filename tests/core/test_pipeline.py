@@ -131,6 +131,33 @@ def test_run_budget_counts_from_the_run_start() -> None:
     assert RunBudget(None).solve_settings(SolveSettings(), 0.0).time_limit is None
 
 
+def test_run_budget_keeps_back_the_time_to_write_the_columns() -> None:
+    """A time-limited run writes every column so far after its solve: the budget keeps
+    that time back while the pass's engine holds them, and gives it back to refinement."""
+    budget = RunBudget(10.0, start=time.perf_counter() - 4.0)  # 6 s left
+    held = SimpleNamespace(held_bytes=int(3.0 * pipeline.SAVE_BYTES_PER_SECOND))  # 3 s
+    budget.held(held)  # type: ignore[arg-type]
+    assert 2.9 < budget.reserve() < 3.1 and not budget()
+    limited = budget.solve_settings(SolveSettings(), resumed_seconds=0.0)
+    assert limited.time_limit is not None and 2.0 < limited.time_limit <= 3.0
+    held.held_bytes = int(7.0 * pipeline.SAVE_BYTES_PER_SECOND)  # the pass went on
+    assert budget()
+    budget.released()
+    assert budget.reserve() == 0.0 and not budget()
+    # a real pass: the engine is held from its creation, and what it holds is its columns
+    scene = cornell_box()
+    settings = MeshSettings(receivers=400, patches=30)
+    budget = RunBudget(1e6)
+    prepared = prepare(scene, settings, stop=budget)
+    try:
+        assert budget.engine is prepared.engine and prepared.engine.held_bytes > 0
+        assert budget.reserve() == prepared.engine.held_bytes / pipeline.SAVE_BYTES_PER_SECOND
+        prepared.engine.release_columns()
+        assert prepared.engine.held_bytes == 0
+    finally:
+        prepared.close()
+
+
 def test_the_pass_promises_no_time_left_from_a_burst(
     caplog: pytest.LogCaptureFixture, monkeypatch: pytest.MonkeyPatch
 ) -> None:
