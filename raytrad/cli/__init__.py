@@ -194,7 +194,7 @@ def _named_below(error: dict[str, Any]) -> str:
 
 
 def _solved(report: dict[str, Any]) -> str:
-    """`` (N solved, the rest from refinement)`` when refinement added receivers."""
+    """`` (N solved, the rest added by refinement)`` when refinement added receivers."""
     refinement = report.get("refinement") or {}
     if not refinement.get("receivers_added"):
         return ""
