@@ -206,9 +206,11 @@ class RunBudget:
     time is spent, or ``stop`` (Ctrl-C) asks.
 
     The checkpoint a time-limited run writes after its solve holds every form-factor column
-    so far (hundreds of MB at large sizes, seconds to write), so while a pass's engine is
-    :meth:`held` the budget keeps back the time to write its columns
-    (:data:`SAVE_BYTES_PER_SECOND`), until :meth:`released` once they are written.
+    so far (hundreds of MB at large sizes, seconds to write), so the budget keeps back the
+    time to write the columns the pass's engine (:meth:`held`) holds
+    (:data:`SAVE_BYTES_PER_SECOND`). A render drops them once they are saved and the pass
+    was whole (:meth:`FormFactorEngine.release_columns`), which gives refinement the time
+    back; a pass cut short keeps them, and refinement, with no time left anyway, is skipped.
 
     Attributes
     ----------
@@ -240,10 +242,6 @@ class RunBudget:
     def held(self, engine: FormFactorEngine) -> None:
         """Keep back the time to write ``engine``'s columns (a pass under way)."""
         self.engine = engine
-
-    def released(self) -> None:
-        """The columns are written (or will not be): keep nothing back."""
-        self.engine = None
 
     def solve_settings(self, settings: SolveSettings, resumed_seconds: float) -> SolveSettings:
         """``settings`` with the solve's time limit set to what is left of the budget (the
@@ -316,8 +314,6 @@ def refine_solution(
         ``result`` with the refined mesh's radiosity.
     refinement : Refinement
     """
-    if isinstance(stop, RunBudget):  # the solve's columns are saved by now
-        stop.released()
     refinement = refine_adaptively(
         prepared.scene,
         prepared.mesh,
