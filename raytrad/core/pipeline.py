@@ -287,7 +287,8 @@ def _pass_progress() -> Callable[[int, int], None]:
                 return
             left = (now - first) / (done - 1) * (total - done)
             log.info(
-                "form factors: %d of %d columns done in %.0f s, about %.0f s left",
+                "form factors: %d of %d columns done in %.0f s, "
+                "about %.0f s left to finish the pass",
                 done,
                 total,
                 now - start,

@@ -176,8 +176,10 @@ def test_the_pass_promises_no_time_left_from_a_burst(
     lines = [r.getMessage() for r in caplog.records]
     assert lines[0] == "form factors: 2 of 541 columns done in 13 s, time left not known yet"
     # 16 columns in 7 s after the first: 524 left take 229 s
-    assert lines[1] == "form factors: 17 of 541 columns done in 20 s, about 229 s left"
-    assert lines[2].endswith("about 225 s left")  # 40 columns in 18 s: 500 left
+    assert lines[1] == (
+        "form factors: 17 of 541 columns done in 20 s, about 229 s left to finish the pass"
+    )
+    assert lines[2].endswith("about 225 s left to finish the pass")  # 40 in 18 s: 500 left
 
 
 def test_the_residual_check_grows_with_the_bake_then_trades_points_for_rays() -> None:
