@@ -251,7 +251,7 @@ def render(
             parts = (engine or prepared.engine).pass_column_parts(whole)  # a pass's columns
             save_state(checkpoint, state, key, parts, whole, logs[0] if logs else None)
 
-        on_column = pass_hook(save, settings.checkpoint_seconds)  # a long pass is saved too
+        on_column = pass_hook(save, settings.checkpoint_seconds, budget.measured)  # saved too
         prepared = prepare(loaded.scene, settings, budget, columns, on_column)
         timings.update(prepared.timings)
 

@@ -199,6 +199,13 @@ def prepare(
     return Prepared(scene, mesh, engine, occluder, timings, closed, balance)
 
 
+#: How fast a checkpoint's columns are written, as :class:`RunBudget` plans for until the
+#: run has measured its own (:meth:`RunBudget.measured`) [B/s]: 549 MB in 2.98 s (184
+#: MB/s, spooled then zipped) and hashed for the manifest in 0.4 s on the reference
+#: machine (2026-12-03; other saves there ran at 125 and 260 MB/s), rounded down.
+SAVE_BYTES_PER_SECOND = 150e6
+
+
 @dataclass
 class RunBudget:
     """The whole run's time limit (``--time-limit``), polled by every stage: the
@@ -207,8 +214,9 @@ class RunBudget:
 
     The checkpoint a time-limited run writes after its solve holds every form-factor column
     so far (hundreds of MB at large sizes, seconds to write), so the budget keeps back the
-    time to write the columns the pass's engine (:meth:`held`) holds
-    (:data:`SAVE_BYTES_PER_SECOND`). A render drops them once they are saved and the pass
+    time to write the columns the pass's engine (:meth:`held`) holds, at
+    :data:`SAVE_BYTES_PER_SECOND` or as fast as the run's own last pass checkpoint wrote
+    (:meth:`measured`). A render drops them once they are saved and the pass
     was whole (:meth:`FormFactorEngine.release_columns`), which gives refinement the time
     back; a pass cut short keeps them, and refinement, with no time left anyway, is skipped.
 
@@ -220,12 +228,17 @@ class RunBudget:
         Another stop request, polled too.
     start : float
         ``time.perf_counter()`` when the run began [s].
+    engine : FormFactorEngine or None
+        The pass's engine, whose columns the checkpoint will hold (:meth:`held`).
+    rate : float
+        How fast they are planned to be written [B/s].
     """
 
     seconds: float | None
     stop: Callable[[], bool] | None = None
     start: float = field(default_factory=time.perf_counter)
     engine: FormFactorEngine | None = field(default=None, repr=False)
+    rate: float = SAVE_BYTES_PER_SECOND
 
     def __call__(self) -> bool:
         spent = self.seconds is not None and self.elapsed() + self.reserve() >= self.seconds
@@ -237,11 +250,18 @@ class RunBudget:
 
     def reserve(self) -> float:
         """Seconds kept back to write the held engine's columns (0 without one) [s]."""
-        return 0.0 if self.engine is None else self.engine.held_bytes / SAVE_BYTES_PER_SECOND
+        return 0.0 if self.engine is None else self.engine.held_bytes / self.rate
 
     def held(self, engine: FormFactorEngine) -> None:
         """Keep back the time to write ``engine``'s columns (a pass under way)."""
         self.engine = engine
+
+    def measured(self, written: int, seconds: float) -> None:
+        """A checkpoint of ``written`` bytes took ``seconds`` [B], [s]: plan the last one's
+        writing at that rate (the manifest's hashing, about a tenth more, is not in it; a
+        save under 64 MB, mostly the page cache's, says little of a larger one's)."""
+        if written >= 1 << 26 and seconds > 0:
+            self.rate = written / seconds
 
     def solve_settings(self, settings: SolveSettings, resumed_seconds: float) -> SolveSettings:
         """``settings`` with the solve's time limit set to what is left of the budget (the
@@ -250,12 +270,6 @@ class RunBudget:
             return settings
         left = self.seconds - self.elapsed() - self.reserve()
         return dataclasses.replace(settings, time_limit=resumed_seconds + max(left, 1e-6))
-
-
-#: How fast a checkpoint's columns are written, as :class:`RunBudget` plans for [B/s]:
-#: 549 MB in 2.98 s (184 MB/s, spooled then zipped) and hashed for the manifest in 0.4 s
-#: on the reference machine (2026-12-03), rounded down.
-SAVE_BYTES_PER_SECOND = 150e6
 
 
 def _pass_progress() -> Callable[[int, int], None]:

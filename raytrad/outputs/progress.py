@@ -68,7 +68,9 @@ def shot_hook(
 
 
 def pass_hook(
-    save: Callable[[SolverState, FormFactorEngine], None], seconds: float
+    save: Callable[[SolverState, FormFactorEngine], None],
+    seconds: float,
+    measured: Callable[[int, float], None] | None = None,
 ) -> Callable[[RadiosityMesh, FormFactorEngine], None]:
     """The form-factor pass's per-column hook: every ``seconds``, ``save`` the state before
     any shot with the engine (whose columns so far go into the checkpoint), so that a run
@@ -76,7 +78,8 @@ def pass_hook(
 
     The checkpoint holds every column so far, so it grows with the pass: the next save
     waits at least :data:`SAVE_SHARE` times as long as the last one took (at 300 000
-    receivers a save writes gigabytes)."""
+    receivers a save writes gigabytes). ``measured(bytes, seconds)`` is told what each
+    save wrote and took (:meth:`raytrad.core.pipeline.RunBudget.measured`)."""
     last_save = [time.perf_counter()]
     wait = [seconds]
 
@@ -86,6 +89,8 @@ def pass_hook(
             save(new_state(mesh), engine)
             last_save[0] = time.perf_counter()
             wait[0] = max(seconds, SAVE_SHARE * (last_save[0] - start))
+            if measured is not None:
+                measured(engine.held_bytes, last_save[0] - start)
 
     return on_column
 
