@@ -275,6 +275,13 @@ def blockers(positions: np.ndarray, triangles: np.ndarray, diagonal: float) -> B
 MARGIN = 2.0
 
 
+def _distinct_planes(normal: np.ndarray, offset: np.ndarray, flat: float) -> np.ndarray:
+    """Indices of one plane of each set equal within 1e-9 in normal and ``flat`` in offset
+    [m] (in the order of their keys, as :func:`numpy.unique` gives them)."""
+    key = np.round(np.concatenate([normal / 1e-9, (offset / flat)[:, None]], axis=1))
+    return np.unique(key, axis=0, return_index=True)[1]
+
+
 def _components(triangles: np.ndarray, vertex_count: int) -> list[np.ndarray]:
     """Triangle indices of each connected component (sharing a vertex), in order of
     their lowest vertex."""
@@ -300,9 +307,7 @@ def _convex(
     corners = points[triangles]
     area, normal = triangle_areas_normals(corners)
     offset = np.einsum("tj,tj->t", normal, corners[:, 0])
-    # one plane per face (coplanar triangles wound alike), tested and kept
-    key = np.round(np.concatenate([normal / 1e-9, (offset / flat)[:, None]], axis=1))
-    _, first = np.unique(key, axis=0, return_index=True)
+    first = _distinct_planes(normal, offset, flat)  # a face's coplanar triangles: once
     if len(first) > MAX_PLANES:
         return None
     normal, offset = normal[first], offset[first]
@@ -315,8 +320,7 @@ def _convex(
     if (sign == 0).any():
         return None
     normal, offset = normal * sign[:, None], offset * sign
-    key = np.round(np.concatenate([normal / 1e-9, (offset / flat)[:, None]], axis=1))
-    _, first = np.unique(key, axis=0, return_index=True)  # a face wound both ways: once
+    first = _distinct_planes(normal, offset, flat)  # a face wound both ways: once
     normal, offset = normal[first], offset[first]
     kind = np.full(len(offset), FACE)
     rim = distinct[count == 1]
