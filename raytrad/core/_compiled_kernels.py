@@ -33,6 +33,8 @@ KERNELS = (
     "clipped_outline",
     "clipped_contour_form_factor",
     "planar_contour_form_factor",
+    "_edge_at",
+    "_corner_ball",
     "piecewise_contour_form_factor",
     "grid_scratch",
     "_linear_shares",
@@ -239,6 +241,38 @@ def planar_contour_form_factor(start, end, points, normals, patch_normal, patch_
     return out
 
 
+def _edge_at(start, end, e, x, n):
+    """:func:`edge_term` of the edge ``start[e] -> end[e]`` seen from ``x``."""
+    return edge_term(
+        start[e, 0] - x[0],
+        start[e, 1] - x[1],
+        start[e, 2] - x[2],
+        end[e, 0] - x[0],
+        end[e, 1] - x[1],
+        end[e, 2] - x[2],
+        n,
+    )
+
+
+def _corner_ball(start, lo, hi):
+    """(5,) a ball round the points ``start[lo:hi]``: their mean and the largest distance
+    from it [m], then a rounding allowance for heights measured against it (1e-12 of the
+    coordinates' size, thousands of times a dot product's rounding) [m]."""
+    ball = np.zeros(5)
+    for e in range(lo, hi):
+        for j in range(3):
+            ball[j] += start[e, j]
+    for j in range(3):
+        ball[j] /= max(hi - lo, 1)
+    far = 0.0
+    for e in range(lo, hi):
+        dx, dy, dz = start[e, 0] - ball[0], start[e, 1] - ball[1], start[e, 2] - ball[2]
+        far = max(far, dx * dx + dy * dy + dz * dz)
+    ball[3] = math.sqrt(far)
+    ball[4] = 1e-12 * (abs(ball[0]) + abs(ball[1]) + abs(ball[2]) + ball[3])
+    return ball
+
+
 def piecewise_contour_form_factor(
     start, end, edge_ptr, piece_point, piece_normal, twin, points, normals, margin
 ):
@@ -250,25 +284,45 @@ def piecewise_contour_form_factor(
     walked once each way, so only the region's own outline is summed (edges whose
     ``twin`` piece, relative to the first, is not in the region). The others that face
     it straddle its horizon and are clipped one by one. A receiver whose horizon the
-    patch stays within ``margin`` of, or below, gets 0."""
+    patch stays within ``margin`` of, or below, gets 0.
+
+    A receiver whose horizon a ball round the corners lies wholly above, by more than
+    rounding, skips both loops over the corners' heights: every corner is above it."""
     out = np.zeros(len(points))
     count = len(piece_point)
     state = np.zeros(count, dtype=np.int8)  # 0 not seen, 1 in the region, 2 clipped
     base = edge_ptr[0]
+    ball = _corner_ball(start, base, edge_ptr[count])
+    rim = np.empty(edge_ptr[count] - base, dtype=np.int64)  # edges without a twin, in order
+    rims = 0
+    for e in range(base, edge_ptr[count]):
+        if not 0 <= twin[e - base] < count:
+            rim[rims] = e
+            rims += 1
     for i in range(len(points)):
         x, n = points[i], normals[i]
-        level = x[0] * n[0] + x[1] * n[1] + x[2] * n[2]
-        top = -np.inf
-        for e in range(base, edge_ptr[count]):
-            top = max(top, start[e, 0] * n[0] + start[e, 1] * n[1] + start[e, 2] * n[2] - level)
-        if not top > margin:
-            continue
+        # the ball's lowest point above the horizon by more than the margin and rounding
+        lowest = (ball[0] - x[0]) * n[0] + (ball[1] - x[1]) * n[1] + (ball[2] - x[2]) * n[2]
+        size = abs(x[0]) + abs(x[1]) + abs(x[2])
+        above = lowest - ball[3] > margin + ball[4] + 1e-12 * size
+        if not above:
+            level = x[0] * n[0] + x[1] * n[1] + x[2] * n[2]
+            top = -np.inf
+            for e in range(base, edge_ptr[count]):
+                h = start[e, 0] * n[0] + start[e, 1] * n[1] + start[e, 2] * n[2] - level
+                top = max(top, h)
+            if not top > margin:
+                continue
+        whole = 0  # pieces in the region: all of them, and its outline is the rim's
         for k in range(count):
             c, m = piece_point[k], piece_normal[k]
             front = (x[0] - c[0]) * m[0] + (x[1] - c[1]) * m[1] + (x[2] - c[2]) * m[2]
             state[k] = 0
             if front > margin:
                 state[k] = 1
+                whole += 1
+                if above:
+                    continue
                 for e in range(edge_ptr[k], edge_ptr[k + 1]):
                     h = (
                         (start[e, 0] - x[0]) * n[0]
@@ -277,26 +331,21 @@ def piecewise_contour_form_factor(
                     )
                     if h < 0.0:
                         state[k] = 2
+                        whole -= 1
                         break
-        total = 0.0
-        region = 0.0
-        for k in range(count):
+        # the region's outline: edges of its pieces whose twin is not in it, in order
+        total = region = 0.0
+        if whole == count:  # every piece: the rim alone, in the same order
+            for r in range(rims):
+                region += _edge_at(start, end, rim[r], x, n)
+        for k in range(count if whole < count else 0):
             if state[k] == 2:
                 total += clipped_outline(start, end, edge_ptr[k], edge_ptr[k + 1], x, n)
             elif state[k] == 1:
                 for e in range(edge_ptr[k], edge_ptr[k + 1]):
                     t = twin[e - base]
-                    if 0 <= t < count and state[t] == 1:
-                        continue  # inside the region: its two ways cancel
-                    region += edge_term(
-                        start[e, 0] - x[0],
-                        start[e, 1] - x[1],
-                        start[e, 2] - x[2],
-                        end[e, 0] - x[0],
-                        end[e, 1] - x[1],
-                        end[e, 2] - x[2],
-                        n,
-                    )
+                    if not (0 <= t < count and state[t] == 1):  # else its two ways cancel
+                        region += _edge_at(start, end, e, x, n)
         out[i] = total + abs(region) / (2.0 * math.pi)
     return out
 

@@ -251,7 +251,7 @@ SECONDS: dict[str, float] = {
     "near_triangles": 5.47,
     "patch_average": 0.35,
     "patch_spread": 0.69,
-    "piecewise_contour_form_factor": 1.28,
+    "piecewise_contour_form_factor": 1.81,
     "planar_contour_form_factor": 1.66,
     "sample_weights": 0.59,
     "shaft_clear": 1.56,

@@ -265,3 +265,48 @@ def test_target_corners_hold_a_patch_planar_by_its_normals_alone() -> None:
     assert heights.max() >= (targets @ normal).max() + LIFT
     assert heights.min() <= (quad @ normal).min() - LIFT
     assert 4e-4 > 2 * LIFT  # the spread is larger than the lift margin alone
+
+
+def _inside_hull(points: np.ndarray, corners: np.ndarray) -> np.ndarray:
+    """Whether each point lies in the convex hull of ``corners``, by the hull's facet
+    planes (scipy's Qhull, independent of the corners' choice) to rounding."""
+    from scipy.spatial import ConvexHull
+
+    planes = ConvexHull(corners).equations  # (F, 4): n . p + d <= 0 inside
+    size = np.abs(points).max() + 1.0
+    return (points @ planes[:, :3].T + planes[:, 3] <= 1e-12 * size).all(axis=1)
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_hull_corners_are_points_whose_hull_holds_every_point(seed: int) -> None:
+    rng = np.random.default_rng(seed)
+    points = rng.normal(size=(400, 3)) * [3.0, 1.0, 0.2] + rng.uniform(-1e3, 1e3, 3)
+    corners = bl.hull_corners(points)
+    assert 8 < len(corners) < len(points)
+    # each corner is one of the points, in their order
+    index = [int(np.flatnonzero((points == c).all(axis=1))[0]) for c in corners]
+    assert index == sorted(index)
+    assert _inside_hull(points, corners).all()
+
+
+def test_hull_corners_keep_every_point_where_there_is_no_hull() -> None:
+    flat = np.c_[np.random.default_rng(0).uniform(size=(30, 2)), np.zeros(30)]
+    np.testing.assert_array_equal(bl.hull_corners(flat), flat)
+    few = np.eye(3)
+    np.testing.assert_array_equal(bl.hull_corners(few), few)
+
+
+def test_target_corners_of_a_folded_patch_hold_every_ray_target() -> None:
+    """A cap of a fine ball (a folded patch): its corners are far fewer than its
+    vertices' lifted copies, and every ray target (a vertex moved up to ``2 lift`` along
+    any axis) lies in their hull."""
+    positions, triangles = icosphere(4)
+    cap = np.unique(triangles[(positions[triangles].mean(axis=1)[:, 2] > 0.8)])
+    vertices = positions[cap]
+    corners = bl.target_corners(vertices, None, LIFT)
+    assert len(corners) < 8 * len(vertices) / 2
+    rng = np.random.default_rng(1)
+    targets = vertices[rng.integers(0, len(vertices), 2000)] + rng.uniform(
+        -2 * LIFT, 2 * LIFT, (2000, 3)
+    )
+    assert _inside_hull(np.vstack([vertices, targets]), corners).all()

@@ -98,6 +98,14 @@ def _seen_whole(mesh: RadiosityMesh, patch: int, x: np.ndarray, n: np.ndarray) -
     return (faces > 1e-9).all(axis=1) & (above >= 0).all(axis=1)
 
 
+def _ball_above(mesh: RadiosityMesh, patch: int, x: np.ndarray, n: np.ndarray) -> np.ndarray:
+    """(C,) whether a ball round the patch's corners lies above each horizon."""
+    corners = mesh.positions[np.unique(mesh.triangles[mesh.triangle_patch == patch])]
+    center = corners.mean(axis=0)
+    radius = np.linalg.norm(corners - center, axis=1).max()
+    return np.einsum("cj,cj->c", center - x, n) - radius > 1e-9
+
+
 def test_ball_patches_match_the_triangle_sum_seen_whole_or_not(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
@@ -111,7 +119,7 @@ def test_ball_patches_match_the_triangle_sum_seen_whole_or_not(
     x, n = _probes(mesh, np.random.default_rng(6), 300)
     outside = np.linalg.norm(x, axis=1) > 0.55
     x, n = x[outside], n[outside]
-    whole = parts = 0
+    whole = parts = above = 0
     results = []
     for patch in folded:
         got = pairs._unoccluded(x, n, int(patch))
@@ -120,8 +128,11 @@ def test_ball_patches_match_the_triangle_sum_seen_whole_or_not(
         seen = _seen_whole(mesh, int(patch), x, n)
         whole += int(seen.sum())
         parts += int(((want > 0) & ~seen).sum())
+        above += int((_ball_above(mesh, int(patch), x, n) & (want > 0)).sum())
         results.append(got)
-    assert whole > 200 and parts > 200, (whole, parts)
+    # whole (the rim's sum), in part, and whole with its ball above the horizon (the
+    # corner loops skipped) all occur
+    assert whole > 200 and parts > 200 and above > 100, (whole, parts, above)
     monkeypatch.setenv("RAYTRAD_KERNELS", "numpy")
     assert compiled.get() is None
     for patch, got in zip(folded, results, strict=True):
