@@ -287,7 +287,9 @@ def piecewise_contour_form_factor(
     patch stays within ``margin`` of, or below, gets 0.
 
     A receiver whose horizon a ball round the corners lies wholly above, by more than
-    rounding, skips both loops over the corners' heights: every corner is above it."""
+    rounding, skips both loops over the corners' heights: every corner is above it. One
+    that sees every piece whole sums the rim alone (the edges without a twin, in the
+    order the region's loop takes them: the same sum to the bit)."""
     out = np.zeros(len(points))
     count = len(piece_point)
     state = np.zeros(count, dtype=np.int8)  # 0 not seen, 1 in the region, 2 clipped
