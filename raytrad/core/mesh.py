@@ -235,7 +235,11 @@ def build_mesh(
         if not keep.any():
             raise SceneError(scene.source, "no surface can see any other (all enclosed)")
         if (~keep).any():
-            log.info("left out %d enclosed triangles", int((~keep).sum()))
+            log.info(
+                "left out %d mesh triangles shut in where no light reaches (the floor "
+                "under a block, the block's base)",
+                int((~keep).sum()),
+            )
     fine, parent, fine_surface, area, normal = (
         fine[keep],
         parent[keep],
@@ -305,7 +309,7 @@ def _imprint(
         gap,
     )
     if changed:
-        log.info("moved or added %d refined vertices on contact lines", changed)
+        log.info("moved or added %d mesh vertices onto contact lines", changed)
     return positions, fine, parent
 
 
