@@ -32,6 +32,7 @@ The scene is the bundled Cornell box unless ``--scene`` names another file (any 
 
     python tools/bench_performance.py                                # 5000 receivers
     python tools/bench_performance.py --scene scenes/blocks-room.obj --no-renders
+    python tools/bench_performance.py --scene big.obj --no-renders --no-numpy  # many triangles
     python tools/bench_performance.py --receivers 5000 20000 --previous ../venv-prev/bin/raytrad
 """
 
@@ -169,7 +170,10 @@ def _solve_seconds(prepared: object, shoot: object) -> tuple[float, int]:
         solver._shoot = original  # type: ignore[assignment]
 
 
-def pass_table(receivers: int) -> None:
+def pass_table(receivers: int, with_numpy: bool = True) -> None:
+    """The pass against raw Embree (table 1) and the solve (table 2); ``with_numpy``
+    False leaves out the numpy kernels' pass and shot (on a scene of many thousand
+    triangles the numpy pass takes minutes)."""
     from raytrad.core import compiled
 
     compiled.get()  # compile (or load) before timing
@@ -181,7 +185,7 @@ def pass_table(receivers: int) -> None:
         naive = prepared.engine.rays_naive
         factors = [_dense(prepared.engine, p) for p in range(0, prepared.mesh.patch_count, 7)]
         solve_fast, shots = _solve_seconds(prepared, solver._shoot)
-        solve_numpy, _ = _solve_seconds(prepared, solver.numpy_shoot)
+        solve_numpy = _solve_seconds(prepared, solver.numpy_shoot)[0] if with_numpy else None
     finally:
         prepared.close()
     embree, rays = _replayed(receivers, cull=True)
@@ -195,14 +199,7 @@ def pass_table(receivers: int) -> None:
     shafts_rays = shafts_only.engine.rays_cast  # type: ignore[attr-defined]
     shafts_worst = _worst(shafts_only, factors)
     shafts_only.close()
-    os.environ["RAYTRAD_KERNELS"] = "numpy"
-    try:
-        numpy_seconds, reference, _ = timed_pass(receivers, record=False)
-        numpy_rays = reference.engine.rays_cast  # type: ignore[attr-defined]
-        worst = _worst(reference, factors)
-        reference.close()
-    finally:
-        del os.environ["RAYTRAD_KERNELS"]
+    numpy_row = _numpy_pass(receivers, factors) if with_numpy else None
     print(
         f"\nform-factor pass, {_CHOSEN['scene'].name}, --receivers {receivers} "
         f"({prepared.mesh.receiver_count} receivers, {prepared.mesh.patch_count} patches; "
@@ -220,24 +217,45 @@ def pass_table(receivers: int) -> None:
         ),
         ("raytrad pass, shaft culling, no convex blockers", shafts_seconds, shafts_rays),
         ("raytrad pass, shaft culling and convex blockers (default)", seconds, rays),
-        ("raytrad pass, numpy kernels (no culling, no blockers)", numpy_seconds, numpy_rays),
     ]
+    if numpy_row is not None:
+        rows.append(("raytrad pass, numpy kernels (no culling, no blockers)", *numpy_row[:2]))
     for name, took, count in rows:
         print(
             f"| {name} | {took:.2f} | {count:.3g} | {count / naive:.2f} | "
             f"{100 * every_embree / took:.0f}% |"
         )
+    numpy_text = "" if numpy_row is None else f"compiled / numpy: {seconds / numpy_row[0]:.2f}; "
     print(
         f"default / unculled pass time: {seconds / every_seconds:.2f}; default / shafts "
-        f"alone: {seconds / shafts_seconds:.2f}; compiled / numpy: "
-        f"{seconds / numpy_seconds:.2f}; largest factor difference (every 7th column) "
-        f"unculled {every_worst:.1e}, shafts alone {shafts_worst:.1e}, numpy kernels {worst:.1e}"
+        f"alone: {seconds / shafts_seconds:.2f}; {numpy_text}largest factor difference "
+        f"(every 7th column) unculled {every_worst:.1e}, shafts alone {shafts_worst:.1e}"
+        + ("" if numpy_row is None else f", numpy kernels {numpy_row[2]:.1e}")
+    )
+    shot_text = (
+        ""
+        if solve_numpy is None
+        else f", numpy shot {solve_numpy:.2f} s ({100 * solve_numpy / seconds:.0f}%); "
+        f"compiled / numpy {solve_fast / solve_numpy:.2f}"
     )
     print(
         f"\nsolve over the cached columns ({shots} shots): compiled shot {solve_fast:.2f} s "
-        f"({100 * solve_fast / seconds:.0f}% of the pass), numpy shot {solve_numpy:.2f} s "
-        f"({100 * solve_numpy / seconds:.0f}%); compiled / numpy {solve_fast / solve_numpy:.2f}"
+        f"({100 * solve_fast / seconds:.0f}% of the pass){shot_text}"
     )
+
+
+def _numpy_pass(receivers: int, factors: list[np.ndarray]) -> tuple[float, int, float]:
+    """The pass with the numpy reference kernels: seconds, rays and the largest factor
+    difference from the compiled pass's ``factors`` (every 7th column)."""
+    os.environ["RAYTRAD_KERNELS"] = "numpy"
+    try:
+        numpy_seconds, reference, _ = timed_pass(receivers, record=False)
+        numpy_rays = reference.engine.rays_cast  # type: ignore[attr-defined]
+        worst = _worst(reference, factors)
+        reference.close()
+    finally:
+        del os.environ["RAYTRAD_KERNELS"]
+    return numpy_seconds, numpy_rays, worst
 
 
 def render_once(raytrad: str, receivers: int, truth: Truth | None) -> dict[str, float]:
@@ -432,6 +450,12 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--no-pass", action="store_true", help="skip the pass tables")
     parser.add_argument("--no-renders", action="store_true", help="skip the render table")
     parser.add_argument(
+        "--no-numpy",
+        action="store_true",
+        help="leave the numpy kernels' pass and shot out of the pass tables (minutes on a "
+        "scene of many thousand triangles)",
+    )
+    parser.add_argument(
         "--accuracy",
         action="store_true",
         help=(
@@ -447,7 +471,7 @@ def main(argv: list[str] | None = None) -> int:
         parser.error("--accuracy has a reference for the bundled Cornell box only")
     _CHOSEN["scene"] = args.scene.resolve()
     if not args.no_pass:
-        pass_table(args.receivers[0])
+        pass_table(args.receivers[0], with_numpy=not args.no_numpy)
     if not args.no_renders:
         truth = Truth.cornell() if args.accuracy else None
         render_table(args.receivers, args.previous, args.runs, truth)
