@@ -377,18 +377,22 @@ def target_corners(vertices: np.ndarray, normal: np.ndarray | None, lift: float)
     """(V', 3) corners of a convex set that holds every ray target of a patch: the convex
     hull of its vertices moved ``2 lift`` (plus their own height range along the normal: a
     patch counts as planar by its normals alone) both ways along its normal (``normal``
-    None, a folded patch: each vertex moved ``2 lift`` along each axis both ways)."""
+    None, a folded patch: each vertex moved ``2 lift`` along each axis both ways, and of
+    those the corners of their hull, :func:`hull_corners`, to a tenth of the lift)."""
     if normal is not None:
         heights = np.asarray(vertices, dtype=np.float64) @ normal
         thick = float(heights.max() - heights.min())
         return prism(plane_hull(vertices, normal), normal, 2.0 * lift + thick)
     cube = 2.0 * lift * np.array(np.meshgrid([-1, 1], [-1, 1], [-1, 1])).reshape(3, -1).T
-    return hull_corners((np.unique(vertices, axis=0)[:, None, :] + cube[None, :, :]).reshape(-1, 3))
+    points = (np.unique(vertices, axis=0)[:, None, :] + cube[None, :, :]).reshape(-1, 3)
+    return hull_corners(points, 0.1 * lift)
 
 
-def hull_corners(points: np.ndarray) -> np.ndarray:
-    """(V', 3) the corners of the convex hull of ``points`` (V, 3) [m], in their order;
-    every point where Qhull cannot build the hull (points in a plane or a line).
+def hull_corners(points: np.ndarray, tolerance: float) -> np.ndarray:
+    """(V', 3) the corners of the convex hull of ``points`` (V, 3) [m], in their order:
+    every point lies in their hull or within ``tolerance`` [m] of it. Every point where
+    Qhull cannot build the hull (points in a plane or a line) or leaves one further out
+    (it merges nearly coplanar facets, to its own rounding).
 
     The blocker and shaft tests hold for a convex set when they hold at its corners, so
     the other points are never needed: a folded patch of a ball of 5 120 triangles keeps
@@ -399,10 +403,16 @@ def hull_corners(points: np.ndarray) -> np.ndarray:
         return points
     from scipy.spatial import ConvexHull, QhullError  # Qhull, only for folded patches
 
+    centred = points - points.mean(axis=0)  # Qhull's rounding goes as the coordinates
     try:
-        return points[np.sort(ConvexHull(points).vertices)]
+        hull = ConvexHull(centred)
     except (QhullError, ValueError):
         return points
+    planes = hull.equations  # (F, 4), unit normals: n . p + d <= 0 inside
+    outside = centred @ planes[:, :3].T + planes[:, 3]
+    if not outside.max() <= tolerance:
+        return points
+    return points[np.sort(hull.vertices)]
 
 
 __all__ = ["Blockers", "blockers", "hull_corners", "numpy_blocked", "target_corners"]

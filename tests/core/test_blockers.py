@@ -281,7 +281,7 @@ def _inside_hull(points: np.ndarray, corners: np.ndarray) -> np.ndarray:
 def test_hull_corners_are_points_whose_hull_holds_every_point(seed: int) -> None:
     rng = np.random.default_rng(seed)
     points = rng.normal(size=(400, 3)) * [3.0, 1.0, 0.2] + rng.uniform(-1e3, 1e3, 3)
-    corners = bl.hull_corners(points)
+    corners = bl.hull_corners(points, 1e-9)
     assert 8 < len(corners) < len(points)
     # each corner is one of the points, in their order
     index = [int(np.flatnonzero((points == c).all(axis=1))[0]) for c in corners]
@@ -291,9 +291,28 @@ def test_hull_corners_are_points_whose_hull_holds_every_point(seed: int) -> None
 
 def test_hull_corners_keep_every_point_where_there_is_no_hull() -> None:
     flat = np.c_[np.random.default_rng(0).uniform(size=(30, 2)), np.zeros(30)]
-    np.testing.assert_array_equal(bl.hull_corners(flat), flat)
+    np.testing.assert_array_equal(bl.hull_corners(flat, 1e-9), flat)
     few = np.eye(3)
-    np.testing.assert_array_equal(bl.hull_corners(few), few)
+    np.testing.assert_array_equal(bl.hull_corners(few, 1e-9), few)
+
+
+@pytest.mark.parametrize("lift", [1e-5, 1e-7, 1e-9])
+def test_target_corners_of_a_thin_patch_far_out_hold_every_target(lift: float) -> None:
+    """A nearly flat folded patch a million metres out: Qhull merges nearly coplanar
+    facets to its rounding, which left points 3e-7 m outside the hull of its corners
+    (lift 1e-7) before the points were centred; every target must lie within a tenth of
+    the lift of the corners' hull, else every point is kept."""
+    rng = np.random.default_rng(0)
+    vertices = np.c_[rng.uniform(0, 1, (300, 2)), 1e-6 * rng.uniform(size=300)] + 1e6
+    corners = bl.target_corners(vertices, None, lift)
+    cube = 2.0 * lift * np.array(np.meshgrid([-1, 1], [-1, 1], [-1, 1])).reshape(3, -1).T
+    targets = (vertices[:, None, :] + cube[None]).reshape(-1, 3)
+    from scipy.spatial import ConvexHull
+
+    centre = corners.mean(axis=0)
+    planes = ConvexHull(corners - centre).equations
+    outside = (targets - centre) @ planes[:, :3].T + planes[:, 3]
+    assert outside.max() <= 0.1 * lift
 
 
 def test_target_corners_of_a_folded_patch_hold_every_ray_target() -> None:
