@@ -1,7 +1,7 @@
 """Speed of the form-factor pass and the whole render, each against a baseline measured in
 the same run.
 
-Three tables:
+Three parts:
 
 1. **Pass against raw Embree.** The scene's form-factor pass (every column, as
    ``raytrad render`` computes it before the first shot) is timed with shaft culling and
@@ -13,9 +13,11 @@ Three tables:
    ``rays / naive`` sets rays cast against receivers x samples of the pairs that see
    each other.
 2. **Compiled against numpy kernels; the solve.** The same pass with
-   ``RAYTRAD_KERNELS=numpy`` (the numpy reference kernels) in the same process, and the
-   check that every variant gives the same factors; then a default solve over the cached
-   columns with the compiled shot and with ``numpy_shoot``, against the pass time.
+   ``RAYTRAD_KERNELS=numpy`` (the numpy reference kernels) in the same process, a last
+   row of table 1, and the check that every variant gives the same factors; then, on a
+   line of its own, a default solve over the cached columns with the compiled shot and
+   with ``numpy_shoot``, against the pass time. ``--no-numpy`` leaves out the numpy pass
+   and shot (minutes on a scene of many thousand triangles).
 3. **Whole renders and scale.** ``raytrad render`` of the scene at each
    ``--receivers``, as a child process: seconds per stage from ``report.json``, shots,
    rays and peak memory; with ``--previous RAYTRAD`` (the ``raytrad`` executable of
@@ -171,7 +173,7 @@ def _solve_seconds(prepared: object, shoot: object) -> tuple[float, int]:
 
 
 def pass_table(receivers: int, with_numpy: bool = True) -> None:
-    """The pass against raw Embree (table 1) and the solve (table 2); ``with_numpy``
+    """The pass against raw Embree (table 1) and the solve (a line below); ``with_numpy``
     False leaves out the numpy kernels' pass and shot (on a scene of many thousand
     triangles the numpy pass takes minutes)."""
     from raytrad.core import compiled
