@@ -236,9 +236,10 @@ def build_mesh(
             raise SceneError(scene.source, "no surface can see any other (all enclosed)")
         if (~keep).any():
             log.info(
-                "left out %d mesh triangles shut in where no light reaches (the floor "
-                "under a block, the block's base)",
+                "left out %d of %d mesh triangles, shut in where no light reaches (the "
+                "floor under a block, the block's base)",
                 int((~keep).sum()),
+                len(keep),
             )
     fine, parent, fine_surface, area, normal = (
         fine[keep],
