@@ -155,15 +155,14 @@ def refine(
 
 
 def estimate_error(
-    solved: Prepared, baked: Prepared, result: SolveResult, error_log: ErrorLog
+    solved: Prepared, baked: Prepared, result: SolveResult, error_log: ErrorLog, quick: bool = False
 ) -> ErrorParts:
-    """The bake's total error and its parts (:func:`raytrad.core.pipeline.total_error`).
-
+    """The bake's total error and its parts (:func:`raytrad.core.pipeline.total_error`):
     ``solved`` holds the mesh that was solved, ``baked`` the (refined) mesh of
-    ``result.radiosity``; the algebraic part is the last estimate of ``error_log``.
-    """
+    ``result.radiosity``; the algebraic part is the last estimate of ``error_log``;
+    ``quick`` (the run's time limit spent): the check traces an eighth of its points."""
     estimate = [math.inf if v is None else v for v in error_log.as_dict()["estimate"][-1]]
-    return pipeline.total_error(solved, baked, result, np.asarray(estimate))
+    return pipeline.total_error(solved, baked, result, np.asarray(estimate), quick)
 
 
 def make_reference(spec: str, prepared: Prepared) -> Reference:
@@ -280,7 +279,7 @@ def render(
             with timed(timings, "refine"):
                 baked, result, refinement = refine(prepared, result, settings, budget)
             with timed(timings, "error"):
-                error = estimate_error(solved, baked, result, error_log)
+                error = estimate_error(solved, baked, result, error_log, budget())
             with timed(timings, "write"):
                 stem = scene_path.stem
                 outputs, facts = write_outputs(baked, result, output_dir, stem, settings, camera)

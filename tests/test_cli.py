@@ -16,6 +16,7 @@ import pytest
 from raytrad import api
 from raytrad.cli import _print_summary
 from raytrad.core.mesh import MeshSettings
+from raytrad.core.pipeline import error_samples
 from raytrad.core.solver import SHOOTING_METHODS, SolveSettings
 from raytrad.formats.ply import read_radiosity_ply
 from raytrad.scene.builtin import cornell_box
@@ -440,6 +441,11 @@ def test_time_limit_bounds_the_form_factor_pass(
     error = report["error"]
     assert error["dominant"] == "algebraic"
     assert max(error["parts"]["discretisation"]) > max(error["parts"]["algebraic"])
+    # the time is spent: the residual check traces an eighth of its points (those not
+    # shut in count)
+    solved = report["refinement"]["receivers_solved"]
+    quick = error_samples(solved, quick=True)[0]
+    assert 0.9 * quick <= error["samples"] <= quick < error_samples(solved)[0]
     assert "the discretisation check counts the unfinished solve too" in summary
     solve = report["solve"]
     assert solve["stop_reason"] == "time-limit"

@@ -191,3 +191,7 @@ def test_the_residual_check_grows_with_the_bake_then_trades_points_for_rays() ->
     assert error_samples(26000) == (1024, 2048)
     cost = [np.prod(error_samples(r)) for r in range(1000, 60000, 500)]
     assert all(b >= a for a, b in itertools.pairwise(cost))
+    # a run whose time is spent checks an eighth of the points, at least 64
+    assert error_samples(26000, quick=True) == (128, 2048)
+    assert error_samples(12000, quick=True) == (256, 1024)
+    assert error_samples(500, quick=True) == (64, 1024)
