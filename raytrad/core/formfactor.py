@@ -285,7 +285,7 @@ class FormFactorEngine:
         before :meth:`release_columns`)."""
         if self.complete and not every:
             return
-        for patch in self._pass_order().tolist():
+        for patch in self.pass_order().tolist():
             if patch in self._cache or patch in self._spill:
                 yield column_parts(patch, self.raw_column(patch))
 
@@ -395,7 +395,7 @@ class FormFactorEngine:
         mesh = self.mesh
         total = mesh.patch_count
         held: dict[int, tuple[np.ndarray, np.ndarray]] = {}  # neither cached nor spilled
-        order = self._pass_order()
+        order = self.pass_order()
         known = sum(1 for p in order.tolist() if p in self._cache or p in self._spill)
         computed = self.raw_columns(order)
         for done, (patch, col) in enumerate(computed, start=1):
@@ -415,7 +415,7 @@ class FormFactorEngine:
                 return _UNBALANCED | {"complete": False}
         return self._balance(held, closed, iterations)
 
-    def _pass_order(self) -> np.ndarray:
+    def pass_order(self) -> np.ndarray:
         """Patches by the order the form-factor pass computes them: emitters first, then
         by area x mean reflectance (what a shortened pass should have)."""
         m = self.mesh

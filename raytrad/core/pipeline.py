@@ -177,7 +177,7 @@ def prepare(
             log.info(
                 "form factors: %d columns from the checkpoint", engine.restore_columns(columns)
             )
-        progress = _pass_progress()
+        progress = _pass_progress(column_weights(mesh, engine.pass_order()))
 
         def column_done(done: int, total: int) -> None:
             progress(done, total)
@@ -272,7 +272,7 @@ class RunBudget:
         return dataclasses.replace(settings, time_limit=resumed_seconds + max(left, 1e-6))
 
 
-def _pass_progress() -> Callable[[int, int], None]:
+def _pass_progress(weights: np.ndarray | None = None) -> Callable[[int, int], None]:
     """Logs the form-factor pass's progress and time left every :data:`PASS_LOG_SECONDS`
     (a log line, so that it shows in CI logs and batch runs, not only on a terminal).
 
@@ -280,9 +280,15 @@ def _pass_progress() -> Callable[[int, int], None]:
     compiling the kernels on a first run (several seconds), which would inflate the
     estimate many times over. Columns finish in bursts (one a thread), so no time is
     promised until :data:`PASS_RATE_COLUMNS` more have finished: two columns finishing
-    together would say "about 0 s left"."""
+    together would say "about 0 s left".
+
+    ``weights`` ((total,), in the pass's order; None: all alike) weigh the columns done
+    and left (:func:`column_weights`): the pass computes large patches first, which cost
+    more, and by count alone the time left read 1.6-2.1 times the truth from a tenth to
+    half of the default Cornell pass."""
     start = last = time.perf_counter()
     first = start
+    done_weight = None if weights is None else np.concatenate([[0.0], np.cumsum(weights)])
 
     def report(done: int, total: int) -> None:
         nonlocal last, first
@@ -300,6 +306,9 @@ def _pass_progress() -> Callable[[int, int], None]:
                 )
                 return
             left = (now - first) / (done - 1) * (total - done)
+            if done_weight is not None and len(done_weight) == total + 1:
+                spent = done_weight[done] - done_weight[1]  # the first column's is not timed
+                left = (now - first) / spent * (done_weight[total] - done_weight[done])
             log.info(
                 "form factors: %d of %d columns done in %.0f s, "
                 "about %.0f s left to finish the pass",
@@ -310,6 +319,16 @@ def _pass_progress() -> Callable[[int, int], None]:
             )
 
     return report
+
+
+def column_weights(mesh: RadiosityMesh, order: np.ndarray) -> np.ndarray:
+    """(P,) a guess of each column's cost in the pass's ``order`` for its progress line: 1
+    plus the patch's triangles over their mean. The time left it gives from a tenth to
+    half of the pass, against the truth (2026-12-03): 1.4-2.0 times it in a two-thread
+    Cornell pass at 60 000 receivers (1.6-2.3 by count), 0.80-1.16 in the room of blocks
+    at 20 000 (1.07-1.48); the early columns also cost more for reasons it misses."""
+    triangles = np.bincount(mesh.triangle_patch, minlength=mesh.patch_count)[order]
+    return 1.0 + triangles / max(float(triangles.mean()), 1e-300)
 
 
 def refine_solution(

@@ -195,3 +195,34 @@ def test_the_residual_check_grows_with_the_bake_then_trades_points_for_rays() ->
     assert error_samples(26000, quick=True) == (128, 2048)
     assert error_samples(12000, quick=True) == (256, 1024)
     assert error_samples(500, quick=True) == (64, 1024)
+
+
+def test_the_time_left_weighs_the_columns_done_and_left(
+    caplog: pytest.LogCaptureFixture, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # the pass computes large patches first: the first 20 columns weigh 3 each, the other
+    # 80 weigh 1. After 20 columns, 19 timed (weight 57) in 19 s: the 80 left weigh 80,
+    # 26.7 s (a count of columns would say 80 s). After 40 (weight 77 timed in 39 s): the
+    # 60 left weigh 60, 30.4 s (60 s by count)
+    clock = iter([0.0, 1.0, 20.0, 40.0])
+    monkeypatch.setattr(pipeline, "time", SimpleNamespace(perf_counter=lambda: next(clock)))
+    monkeypatch.setattr(pipeline, "PASS_LOG_SECONDS", 0.0)
+    weights = np.array([3.0] * 20 + [1.0] * 80)
+    report = pipeline._pass_progress(weights)
+    with caplog.at_level(logging.INFO, logger="raytrad.core.pipeline"):
+        report(1, 100)
+        report(20, 100)
+        report(40, 100)
+    lines = [r.getMessage() for r in caplog.records]
+    assert lines[0].endswith("about 27 s left to finish the pass")  # 57 in 19 s: 80 left
+    assert lines[1].endswith("about 30 s left to finish the pass")  # 77 in 39 s: 60 left
+
+
+def test_column_weights_follow_the_triangles_in_pass_order(cornell) -> None:
+    mesh, engine = cornell.mesh, cornell.engine
+    order = engine.pass_order()
+    weights = pipeline.column_weights(mesh, order)
+    triangles = np.bincount(mesh.triangle_patch, minlength=mesh.patch_count)[order]
+    assert weights.shape == (mesh.patch_count,) and (weights > 1.0).all()
+    np.testing.assert_allclose(weights.mean(), 2.0)
+    assert np.array_equal(np.argsort(weights, kind="stable"), np.argsort(triangles, kind="stable"))
