@@ -305,10 +305,11 @@ def _pass_progress(weights: np.ndarray | None = None) -> Callable[[int, int], No
                     now - start,
                 )
                 return
-            left = (now - first) / (done - 1) * (total - done)
-            if done_weight is not None and len(done_weight) == total + 1:
-                spent = done_weight[done] - done_weight[1]  # the first column's is not timed
-                left = (now - first) / spent * (done_weight[total] - done_weight[done])
+            weight = done_weight  # cumulative, or the count's where there is none
+            if weight is None or len(weight) != total + 1:
+                weight = np.arange(total + 1.0)
+            spent = weight[done] - weight[1]  # the first column's is not timed
+            left = (now - first) / spent * (weight[total] - weight[done])
             log.info(
                 "form factors: %d of %d columns done in %.0f s, "
                 "about %.0f s left to finish the pass",
@@ -368,6 +369,10 @@ def refine_solution(
     return baked, dataclasses.replace(result, radiosity=refinement.radiosity), refinement
 
 
+#: The fewest points of a quick residual check (:func:`error_samples`).
+QUICK_POINTS = 64
+
+
 def error_samples(receivers: int, quick: bool = False) -> tuple[int, int]:
     """Points and rays a point of the residual check for a bake of ``receivers``; ``quick``
     (a run whose time limit is spent, or interrupted, when the check starts) an eighth of
@@ -388,10 +393,6 @@ def error_samples(receivers: int, quick: bool = False) -> tuple[int, int]:
     else:
         points, rays = int(min(SAMPLES, max(256, points))), RAYS
     return (max(QUICK_POINTS, points // 8), rays) if quick else (points, rays)
-
-
-#: The fewest points of a quick residual check (:func:`error_samples`).
-QUICK_POINTS = 64
 
 
 def total_error(
