@@ -462,9 +462,9 @@ def final_gather(
         return None, hidden
     scale = np.ones(len(lit))
     if occluder is not None:
-        row_sum, limit = rows.row_sum, ROW_FIX_LIMIT
-        fix = closed[lit] & (np.abs(row_sum - 1.0) < limit) & (row_sum > 0)
-        scale = np.where(fix, row_sum, 1.0)
+        # rows judged before the column scales, as balancing judges the receivers' rows
+        fix = closed[lit] & (np.abs(rows.raw_sum - 1.0) < ROW_FIX_LIMIT) & (rows.row_sum > 0)
+        scale = np.where(fix, rows.row_sum, 1.0)
     radiosity = np.array(radiosity, dtype=np.float64)
     result = np.array(emitted_exitance, dtype=np.float64)
     for _ in range(1 if own is None else GATHER_PASSES):

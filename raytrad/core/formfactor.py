@@ -68,9 +68,12 @@ _UNBALANCED: dict[str, float | bool] = {
     "closed_rows": 0,
     "closed_columns": 0,
     "capped_columns": 0,
+    "short_columns": 0,
+    "short_area": 0.0,
     "row_error": 0.0,
     "capture_excess": 0.0,
     "column_excess": 0.0,
+    "column_deficit": 0.0,
     "iterations": 0,
 }
 
@@ -386,11 +389,8 @@ class FormFactorEngine:
 
         Returns
         -------
-        dict with ``closed_rows`` (rows held to 1), ``closed_columns`` (patches held to
-        g = 1), ``capped_columns`` (other patches scaled down to g = 1), ``row_error`` and
-        ``capture_excess`` (largest deviations before balancing), ``column_excess``
-        (largest g - 1 after it), ``iterations`` and ``complete`` (every column computed
-        and balanced).
+        dict (:meth:`~raytrad.core.balance.Balanced.summary`) with ``complete`` (every
+        column computed and balanced).
         """
         mesh = self.mesh
         total = mesh.patch_count
@@ -450,24 +450,13 @@ class FormFactorEngine:
         found = balance_streamed(
             columns, mesh.receiver_area, mesh.patch_area, fix_rows, closed_patch, iterations
         )
-        row_scale, col_scale, done = found.row_scale, found.column_scale, found.iterations
-        capture0, capture = found.capture_before, found.capture_after
-        self._row_scale = row_scale
-        self._col_scale = col_scale
+        self._row_scale = found.row_scale
+        self._col_scale = found.column_scale
         self.complete = True
         self._final_rows = found.row_sums
         self.closed_rows = np.asarray(closed, dtype=bool)
         self.max_row_sum = float(self._final_rows.max(initial=0.0))
-        return {
-            "closed_rows": int(fix_rows.sum()),
-            "closed_columns": int(closed_patch.sum()),
-            "capped_columns": int(((col_scale < 1.0) & ~closed_patch).sum()),
-            "row_error": float(np.abs(sums[fix_rows] - 1.0).max(initial=0.0)),
-            "capture_excess": float(max(0.0, capture0.max(initial=0.0) - 1.0)),
-            "column_excess": float(max(0.0, capture.max(initial=0.0) - 1.0)),
-            "iterations": done,
-            "complete": self.complete,
-        }
+        return found.summary(sums, fix_rows, closed_patch, mesh.patch_area)
 
     def row_sums(self) -> np.ndarray:
         """(R,) sum_p F_jp of the balanced factors (the raw ones before :meth:`balance`)."""
@@ -592,7 +581,7 @@ class FormFactorEngine:
         try:
             for patch, (near, factors, rays, gather) in zip(patches, done, strict=True):
                 self.rays_cast += rays
-                rows.add(patch, near, factors * self._col_scale[patch], gather)
+                rows.add(patch, near, factors, gather, self._col_scale[patch])
                 stages.report(stages.FINAL_GATHER, patch + 1, len(patches))
                 if stop is not None and stop():
                     return None

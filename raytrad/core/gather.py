@@ -23,7 +23,7 @@ solution as a correction that is itself shot on (:func:`raytrad.core.solver.solv
 from __future__ import annotations
 
 import functools
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -132,16 +132,30 @@ def join_gathers(parts: list[GatherWeights], offsets: list[int]) -> GatherWeight
 @dataclass
 class GatherRows:
     """What :meth:`FormFactorEngine.gather_rows` found: per patch, the points that see it
-    (indices), their balanced factors and their near-field gather weights."""
+    (indices), their balanced factors and their near-field gather weights; ``row_sum`` and
+    ``raw_sum`` (N,) sum them balanced and before the column scales."""
 
     count: int
     row_sum: np.ndarray
     patches: list[tuple[int, np.ndarray, np.ndarray, GatherWeights]]
     means: SubareaMeans | None = None  # the sources beyond the receivers
+    raw_sum: np.ndarray = field(init=False)
 
-    def add(self, patch: int, near: np.ndarray, factors: np.ndarray, gather: GatherWeights) -> None:
-        """Patch ``patch``'s row: the points ``near`` (indices) that see it, their balanced
-        ``factors`` (added to ``row_sum``) and their gather weights."""
+    def __post_init__(self) -> None:
+        self.raw_sum = np.zeros(self.count)
+
+    def add(
+        self,
+        patch: int,
+        near: np.ndarray,
+        factors: np.ndarray,
+        gather: GatherWeights,
+        scale: float = 1.0,
+    ) -> None:
+        """Patch ``patch``'s row: the points ``near`` (indices) that see it, their
+        ``factors`` before the patch's column ``scale`` and their gather weights."""
+        self.raw_sum[near] += factors
+        factors = factors * scale
         self.row_sum[near] += factors
         self.patches.append((patch, near, factors, gather))
 

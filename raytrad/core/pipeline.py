@@ -32,6 +32,7 @@ from raytrad.core.accuracy import (
     discretisation_error,
 )
 from raytrad.core.adaptive import Refinement, RefineSettings, refine_adaptively
+from raytrad.core.balance import COLUMN_SCALE_LIMIT
 from raytrad.core.convergence import counted_receivers
 from raytrad.core.formfactor import FormFactorEngine
 from raytrad.core.mesh import MeshSettings, RadiosityMesh, build_mesh, hide_receivers
@@ -195,6 +196,17 @@ def prepare(
             balance["row_error"],
             balance["capped_columns"],
             balance["capture_excess"],
+        )
+    if balance.get("short_columns"):
+        log.warning(
+            "%d patches (%.2g%% of the surface) deliver up to %.0f%% less than they shoot: "
+            "surfaces face them nearer than the receivers are spaced (a gap of millimetres); "
+            "their factors were scaled up by %.2f at most, and the error check counts what "
+            "is missed",
+            balance["short_columns"],
+            100.0 * float(balance["short_area"]),
+            100.0 * float(balance["column_deficit"]),
+            COLUMN_SCALE_LIMIT,
         )
     return Prepared(scene, mesh, engine, occluder, timings, closed, balance)
 

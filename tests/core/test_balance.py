@@ -7,7 +7,12 @@ import numpy as np
 import pytest
 
 from raytrad.core import balance, compiled
-from raytrad.core.balance import balance_columns, balance_streamed, numpy_balance_columns
+from raytrad.core.balance import (
+    COLUMN_SCALE_LIMIT,
+    balance_columns,
+    balance_streamed,
+    numpy_balance_columns,
+)
 
 
 def _random_columns(seed: int, receivers: int = 400, patches: int = 60):
@@ -36,8 +41,17 @@ def test_balanced_factors_meet_the_constraints(seed: int) -> None:
     sums = balanced.sum(axis=1)
     np.testing.assert_allclose(sums[fixed & (dense.sum(axis=1) > 0)], 1.0, atol=1e-12)
     capture = (a @ balanced) / area
-    np.testing.assert_allclose(capture[closed], 1.0, atol=1e-6)
+    # a closed patch is held to 1 unless that takes more than the limit's scale
+    assert found.column_scale.max() <= COLUMN_SCALE_LIMIT
+    held = found.column_scale < COLUMN_SCALE_LIMIT
+    np.testing.assert_allclose(capture[closed & held], 1.0, atol=1e-6)
+    assert (capture[closed & ~held] < 1.0).all()
     assert capture.max() <= 1.0 + 1e-6
+    summary = found.summary(dense.sum(axis=1), fixed, closed, area)
+    assert summary["short_columns"] == (closed & ~held).sum()
+    assert summary["short_area"] == pytest.approx(area[closed & ~held].sum() / area.sum())
+    short = capture[closed & ~held]
+    assert summary["column_deficit"] == pytest.approx(1.0 - short.min() if len(short) else 0.0)
     np.testing.assert_allclose(found.row_sums, sums, rtol=1e-12)
     np.testing.assert_allclose(found.capture_after, capture, rtol=1e-12)
     np.testing.assert_allclose(found.capture_before, (a @ dense) / area, rtol=1e-12)
@@ -83,3 +97,37 @@ def test_streamed_balance_matches_the_numpy_reference(
     assert fast.column_scale[7] == 1.0
     for got, want in zip(fast, slow, strict=True):
         np.testing.assert_allclose(got, want, rtol=1e-12, atol=0)
+
+
+@pytest.mark.parametrize("streamed", [True, False])
+def test_a_gap_narrower_than_the_receivers_is_not_balanced_by_far_factors(streamed: bool) -> None:
+    """A light 1 mm under a ceiling, facing it: the ceiling's receivers over the light see
+    nothing else (rows held to 1) but their areas sum to 70 % of the light's, so the light
+    cannot capture all it shoots through them. Before the limit, Sinkhorn scaled the
+    light's column until the small factors of receivers outside the gap made up the rest:
+    the far receiver's factor 0.003 came out 0.27, 90 times the light it should get. Now
+    the column scales by the limit at most, the light delivers 70 % x 1.25 of what it
+    shoots, and the far receiver's factor grows by 1.25 at most.
+    """
+    # receivers 0-2 in the gap (closed, each sees only the light); 3 far away (open) sees
+    # the light barely and the wall mostly; patch 0 the light (closed), patch 1 a wall
+    dense = np.array([[1.0, 0.0], [1.0, 0.0], [1.0, 0.0], [0.003, 0.5]])
+    receiver_area = np.array([0.21, 0.21, 0.21, 1.0])
+    patch_area = np.array([0.9, 10.0])
+    fixed = np.array([True, True, True, False])
+    closed = np.array([True, False])
+    rows, cols = np.nonzero(dense.T)
+    pointer = np.searchsorted(rows, np.arange(3)).astype(np.int64)
+    values = dense.T[rows, cols]
+    args = (pointer, cols, values, receiver_area, patch_area, fixed, closed)
+    found = balance_columns(*args) if streamed else numpy_balance_columns(*args)
+    assert found.column_scale[0] == pytest.approx(COLUMN_SCALE_LIMIT)
+    balanced = found.row_scale[:, None] * dense * found.column_scale[None, :]
+    np.testing.assert_allclose(balanced[:3].sum(axis=1), 1.0, atol=1e-12)  # gap rows held
+    assert balanced[3, 0] <= COLUMN_SCALE_LIMIT * 0.003 + 1e-15
+    capture = receiver_area @ balanced / patch_area
+    assert capture[0] == pytest.approx((0.63 + 0.003 * COLUMN_SCALE_LIMIT) / 0.9)  # short of 1
+    summary = found.summary(dense.sum(axis=1), fixed, closed, patch_area)
+    assert summary["short_columns"] == 1
+    assert summary["short_area"] == pytest.approx(0.9 / 10.9)
+    assert summary["column_deficit"] == pytest.approx(1.0 - capture[0])
