@@ -15,8 +15,7 @@ KERNELS = (
     "patch_spread",
     "patch_average",
     "shoot",
-    "column_capture",
-    "column_accumulate",
+    "column_sweep",
     "column_final",
 )
 
@@ -271,20 +270,21 @@ def shoot(
     return power, reflected, capture
 
 
-def column_capture(rows, values, receiver_area, row_scale):
-    """``sum a F r`` of one column (see :func:`raytrad.core.balance.numpy_column_capture`)."""
-    capture = 0.0
+def column_sweep(rows, values, receiver_area, row_scale, patch_area, closed, limit, row_sum):
+    """One column's step of a balancing round: its capture, its new scale, and its factors
+    at that scale added to ``row_sum``; returns (capture, scale) (see
+    :func:`raytrad.core.balance.numpy_column_sweep`)."""
+    total = 0.0
     for k in range(len(rows)):
         j = rows[k]
-        capture += receiver_area[j] * values[k] * row_scale[j]
-    return capture
-
-
-def column_accumulate(rows, values, scale, row_sum):
-    """``row_sum[rows] += values * scale`` (see
-    :func:`raytrad.core.balance.numpy_column_accumulate`)."""
+        total += receiver_area[j] * values[k] * row_scale[j]
+    capture = total / patch_area
+    scale = 1.0
+    if capture > 1.0 or (closed and capture > 0.0):
+        scale = min(1.0 / capture, limit)
     for k in range(len(rows)):
         row_sum[rows[k]] += values[k] * scale
+    return capture, scale
 
 
 def column_final(rows, values, receiver_area, row_scale, scale, row_sums):

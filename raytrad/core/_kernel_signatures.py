@@ -34,28 +34,24 @@ SIGNATURES: dict[str, list[list[str]]] = {
             "float64",
         ],
     ],
-    "column_accumulate": [
-        [
-            "Array(int32, 1, 'C', False, aligned=True)",
-            "Array(float32, 1, 'C', False, aligned=True)",
-            "float64",
-            "Array(float64, 1, 'C', False, aligned=True)",
-        ],
-    ],
-    "column_capture": [
-        [
-            "Array(int32, 1, 'C', False, aligned=True)",
-            "Array(float32, 1, 'C', False, aligned=True)",
-            "Array(float64, 1, 'C', False, aligned=True)",
-            "Array(float64, 1, 'C', False, aligned=True)",
-        ],
-    ],
     "column_final": [
         [
             "Array(int32, 1, 'C', False, aligned=True)",
             "Array(float32, 1, 'C', False, aligned=True)",
             "Array(float64, 1, 'C', False, aligned=True)",
             "Array(float64, 1, 'C', False, aligned=True)",
+            "float64",
+            "Array(float64, 1, 'C', False, aligned=True)",
+        ],
+    ],
+    "column_sweep": [
+        [
+            "Array(int32, 1, 'C', False, aligned=True)",
+            "Array(float32, 1, 'C', False, aligned=True)",
+            "Array(float64, 1, 'C', False, aligned=True)",
+            "Array(float64, 1, 'C', False, aligned=True)",
+            "float64",
+            "bool",
             "float64",
             "Array(float64, 1, 'C', False, aligned=True)",
         ],
@@ -245,9 +241,8 @@ SIGNATURES: dict[str, list[list[str]]] = {
 SECONDS: dict[str, float] = {
     "block_irradiance": 0.41,
     "blocked_pairs": 1.89,
-    "column_accumulate": 0.11,
-    "column_capture": 0.12,
     "column_final": 0.14,
+    "column_sweep": 0.23,
     "near_triangles": 5.47,
     "patch_average": 0.35,
     "patch_spread": 0.69,

@@ -200,8 +200,7 @@ def balance_streamed(
     row_sum = np.zeros(len(area))
     ones = np.ones(len(area))
     for p, rows, values in columns():
-        capture0[p] = step.column_capture(rows, values, area, ones) / patch_area[p]
-        step.column_accumulate(rows, values, 1.0, row_sum)
+        capture0[p] = step.column_final(rows, values, area, ones, 1.0, row_sum) / patch_area[p]
     row_scale = _fixed_row_scales(row_sum, fixed_rows)
     done = 0
     while done < iterations:
@@ -209,9 +208,16 @@ def balance_streamed(
         row_sum[:] = 0.0
         new = np.ones(total)  # a patch with no entries captures nothing: scale 1
         for p, rows, values in columns():
-            capture = step.column_capture(rows, values, area, row_scale) / patch_area[p]
-            new[p] = _column_scale(capture, closed_columns[p])
-            step.column_accumulate(rows, values, float(new[p]), row_sum)
+            _, new[p] = step.column_sweep(
+                rows,
+                values,
+                area,
+                row_scale,
+                float(patch_area[p]),
+                bool(closed_columns[p]),
+                COLUMN_SCALE_LIMIT,
+                row_sum,
+            )
         change = np.abs(new / col_scale - 1.0).max(initial=0.0)
         col_scale = new
         row_scale = _fixed_row_scales(row_sum, fixed_rows)
@@ -262,11 +268,36 @@ def balance_columns(
     )
 
 
-def _column_scale(capture: float, closed: bool) -> float:
+def numpy_column_sweep(
+    rows: np.ndarray,
+    values: np.ndarray,
+    receiver_area: np.ndarray,
+    row_scale: np.ndarray,
+    patch_area: float,
+    closed: bool,
+    limit: float,
+    row_sum: np.ndarray,
+) -> tuple[float, float]:
+    """One column's step of a balancing round (:func:`balance_streamed`): its capture
+    ``g = sum a F r / A`` under the row scales, its new scale (:func:`_column_scale`, at
+    most ``limit``), and its factors at that scale added to ``row_sum``.
+
+    Returns
+    -------
+    capture : float [1]
+    scale : float [1]
+    """
+    capture = float(np.sum(receiver_area[rows] * values * row_scale[rows])) / patch_area
+    scale = _column_scale(capture, closed, limit)
+    row_sum[rows] += np.asarray(values, dtype=np.float64) * scale  # a column's rows differ
+    return capture, scale
+
+
+def _column_scale(capture: float, closed: bool, limit: float = COLUMN_SCALE_LIMIT) -> float:
     """A column's scale for its capture: 1 / capture when it is closed or above 1, at most
     :data:`COLUMN_SCALE_LIMIT` (and 1 when it captures nothing)."""
     if capture > 1.0 or (closed and capture > 0.0):
-        return min(1.0 / capture, COLUMN_SCALE_LIMIT)
+        return min(1.0 / capture, limit)
     return 1.0
 
 
@@ -280,29 +311,13 @@ def _column_steps() -> SimpleNamespace:
     fast = compiled.get()
     if fast is not None:
         return SimpleNamespace(
-            column_capture=fast.column_capture,
-            column_accumulate=fast.column_accumulate,
+            column_sweep=fast.column_sweep,
             column_final=fast.column_final,
         )
     return SimpleNamespace(
-        column_capture=numpy_column_capture,
-        column_accumulate=numpy_column_accumulate,
+        column_sweep=numpy_column_sweep,
         column_final=numpy_column_final,
     )
-
-
-def numpy_column_capture(
-    rows: np.ndarray, values: np.ndarray, receiver_area: np.ndarray, row_scale: np.ndarray
-) -> float:
-    """``sum_k a_j(k) F_k r_j(k)`` of one column [m2]."""
-    return float(np.sum(receiver_area[rows] * values * row_scale[rows]))
-
-
-def numpy_column_accumulate(
-    rows: np.ndarray, values: np.ndarray, scale: float, row_sum: np.ndarray
-) -> None:
-    """``row_sum[rows] += values * scale`` (the rows of a column are distinct)."""
-    row_sum[rows] += np.asarray(values, dtype=np.float64) * scale
 
 
 def numpy_column_final(
@@ -379,5 +394,6 @@ __all__ = [
     "balance_streamed",
     "closed_patches",
     "numpy_balance_columns",
+    "numpy_column_sweep",
     "sinkhorn",
 ]

@@ -259,7 +259,7 @@ def test_a_helper_compiles_into_the_cache_and_the_check_sees_it(tmp_path) -> Non
     decoy = tmp_path / "decoy"
     (decoy / "raytrad").mkdir(parents=True)
     (decoy / "raytrad" / "__init__.py").write_text("raise ImportError('the decoy')\n")
-    helper = compiled.helper_command(["column_capture", "column_final"])
+    helper = compiled.helper_command(["column_sweep", "column_final"])
     subprocess.run(helper, env=env, check=True, capture_output=True, cwd=decoy)
     check = (
         "import numba\n"
@@ -267,7 +267,7 @@ def test_a_helper_compiles_into_the_cache_and_the_check_sees_it(tmp_path) -> Non
         "from raytrad.core._kernel_signatures import SIGNATURES as S\n"
         "k = compiled._dispatchers(numba)\n"
         "print([compiled._cached(numba, k[n], S[n]) for n in "
-        "('column_capture', 'column_final', 'column_accumulate')])\n"
+        "('column_sweep', 'column_final', 'patch_average')])\n"
     )
     done = subprocess.run(
         [sys.executable, "-c", check], env=env, check=True, capture_output=True, text=True
