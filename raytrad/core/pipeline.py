@@ -200,9 +200,10 @@ def prepare(
     if balance.get("short_columns"):
         log.warning(
             "%d patches (%.2g%% of the surface) deliver up to %.0f%% less than they shoot: "
-            "surfaces face them nearer than the receivers are spaced (a gap of millimetres); "
-            "their factors were scaled up by %.2f at most, and the error check counts what "
-            "is missed",
+            "surfaces face them from nearer than the receivers are spaced (a gap of "
+            "millimetres: a light facing the ceiling it hangs under?); their factors were "
+            "scaled up by %.2f at most, and what they miss counts as escaped in the energy "
+            "ledger",
             balance["short_columns"],
             100.0 * float(balance["short_area"]),
             100.0 * float(balance["column_deficit"]),
