@@ -27,7 +27,12 @@ import numpy as np
 
 from raytrad.constants import scene_diagonal, tol
 from raytrad.core import stages
-from raytrad.core.balance import BALANCE_ITERATIONS, balance_streamed, closed_patches
+from raytrad.core.balance import (
+    BALANCE_ITERATIONS,
+    COLUMN_SCALE_LIMIT,
+    balance_streamed,
+    closed_patches,
+)
 from raytrad.core.columns import (
     Column,
     ColumnSpill,
@@ -140,6 +145,8 @@ class FormFactorEngine:
         self._final_rows: np.ndarray | None = None
         #: Receivers that see no opening (set by :meth:`balance`).
         self.closed_rows: np.ndarray | None = None
+        #: Patches balancing could not hold to deliver what they shoot (``short_columns``).
+        self.short_patches = np.zeros(mesh.patch_count, dtype=bool)
         #: Every column computed and balanced (set by :meth:`balance`).
         self.complete = False
         diag = scene_diagonal(mesh.positions)
@@ -456,6 +463,7 @@ class FormFactorEngine:
         self._final_rows = found.row_sums
         self.closed_rows = np.asarray(closed, dtype=bool)
         self.max_row_sum = float(self._final_rows.max(initial=0.0))
+        self.short_patches = closed_patch & (found.column_scale >= COLUMN_SCALE_LIMIT)
         return found.summary(sums, fix_rows, closed_patch, mesh.patch_area)
 
     def row_sums(self) -> np.ndarray:

@@ -127,8 +127,15 @@ class Tracer:
         (its remainder and the second place the point in the triangle by the square-root
         map), so stratified uniforms give stratified emitter samples.
         """
+        return self.direct_and_unoccluded(origin, normal, uniforms)[0]
+
+    def direct_and_unoccluded(
+        self, origin: np.ndarray, normal: np.ndarray, uniforms: np.ndarray | None = None
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """(N, 3) :meth:`direct`'s estimate, and (N, 3) the same samples' estimate with
+        nothing blocking them: their ratio is the visible share of the emitters' light."""
         if self.emitter_area == 0.0:
-            return np.zeros((len(origin), 3))
+            return np.zeros((len(origin), 3)), np.zeros((len(origin), 3))
         if uniforms is None:
             uniforms = self.rng.random((len(origin), 2))
         s = uniforms[:, 0] * self.emitter_area
@@ -155,9 +162,10 @@ class Tracer:
             blocked[ok] = self.occluder.occluded_local(
                 origin[ok], direction[ok], dist[ok] - 2.0 * self.offset
             )
-        geometry = np.where(ok & ~blocked, cos_x * cos_y / dist2, 0.0)
+        bare = np.where(ok, cos_x * cos_y / dist2, 0.0)
         # emitted radiance E / pi, times the area of all emitters (pdf 1 / area)
-        return self.emission[tri] / np.pi * (geometry * self.emitter_area)[:, None]
+        radiance = self.emission[tri] / np.pi * self.emitter_area
+        return radiance * np.where(blocked, 0.0, bare)[:, None], radiance * bare[:, None]
 
 
 def cosine_directions(normal: np.ndarray, rng: np.random.Generator) -> np.ndarray:

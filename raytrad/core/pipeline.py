@@ -198,7 +198,8 @@ def prepare(
             balance["capture_excess"],
         )
     if balance.get("short_columns"):
-        log.warning(
+        log.log(
+            _short_level(mesh, engine.short_patches, float(balance["short_area"])),
             "%d patches (%.2g%% of the surface) deliver up to %.0f%% less than they shoot: "
             "surfaces face them from nearer than the receivers are spaced (a gap of "
             "millimetres: a light facing the ceiling it hangs under?); their factors were "
@@ -210,6 +211,20 @@ def prepare(
             COLUMN_SCALE_LIMIT,
         )
     return Prepared(scene, mesh, engine, occluder, timings, closed, balance)
+
+
+#: The short patches' share of the surface (:meth:`FormFactorEngine.balance`) below which
+#: they are logged as information, not warned of, unless one of them emits.
+SHORT_AREA_WARNING = 1e-3
+
+
+def _short_level(mesh: RadiosityMesh, short: np.ndarray, area: float) -> int:
+    """The log level for patches balancing left short: a warning when they are at least
+    :data:`SHORT_AREA_WARNING` of the surface or one emits (the light it loses is the
+    scene's), else information (a table leg's top under the table, 0.08 % of a room)."""
+    emitting = (mesh.receiver_emitted_exitance[mesh.triangle_receivers] > 0).any(axis=(1, 2))
+    lit = bool(short[mesh.triangle_patch[emitting]].any())
+    return logging.WARNING if lit or area >= SHORT_AREA_WARNING else logging.INFO
 
 
 #: How fast a checkpoint's columns are written, as :class:`RunBudget` plans for until the
