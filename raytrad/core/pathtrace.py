@@ -163,9 +163,13 @@ class Tracer:
                 origin[ok], direction[ok], dist[ok] - 2.0 * self.offset
             )
         bare = np.where(ok, cos_x * cos_y / dist2, 0.0)
+        geometry = np.where(blocked, 0.0, bare)
         # emitted radiance E / pi, times the area of all emitters (pdf 1 / area)
-        radiance = self.emission[tri] / np.pi * self.emitter_area
-        return radiance * np.where(blocked, 0.0, bare)[:, None], radiance * bare[:, None]
+        radiance = self.emission[tri] / np.pi
+        return (
+            radiance * (geometry * self.emitter_area)[:, None],
+            radiance * (bare * self.emitter_area)[:, None],
+        )
 
 
 def cosine_directions(normal: np.ndarray, rng: np.random.Generator) -> np.ndarray:
