@@ -47,7 +47,7 @@ import numpy as np
 from raytrad.constants import tol
 from raytrad.core.formfactor import FormFactorEngine
 from raytrad.core.hidden import fill_hidden
-from raytrad.core.kernels import polygon_form_factor
+from raytrad.core.kernels import numpy_polygon_form_factor
 from raytrad.core.mesh import RadiosityMesh
 from raytrad.core.pathtrace import Tracer, cosine_directions_from
 from raytrad.core.shading import shade, triangle_normals, twin_triangles
@@ -74,10 +74,11 @@ STANDARD_ERRORS = 2.0
 _CHUNK = 64
 
 #: Most (point, emitter triangle) pairs whose exact unoccluded irradiance the check
-#: computes for its direct light (:func:`_direct_halves`); beyond it (an emissive mesh
-#: of thousands of triangles) the direct light is sampled alone. About 1 s compiled (2 s
-#: for 4 million pairs on the reference machine).
-EXACT_DIRECT_PAIRS = 1 << 21
+#: computes for its direct light (:func:`_direct_halves`), in numpy (2 us a pair: about
+#: 1 s, and no kernel to compile for a check the Cornell box needs 2 048 pairs for);
+#: beyond it (an emissive mesh of hundreds of triangles) the direct light is sampled
+#: alone.
+EXACT_DIRECT_PAIRS = 1 << 19
 
 
 @dataclass(frozen=True)
@@ -361,11 +362,11 @@ def _unoccluded_direct(tracer: Tracer, origin: np.ndarray, normal: np.ndarray) -
     """(N, 3) exact irradiance from every emitter triangle of ``tracer`` at each origin
     (its occluder's local frame) with nothing in the way, ``sum_e E_e F(x <- e)``
     [W m-2]: Lambert's formula on each triangle clipped to the origin's horizon
-    (:func:`~raytrad.core.kernels.polygon_form_factor`), a single-sided one only from its
-    front."""
+    (:func:`~raytrad.core.kernels.numpy_polygon_form_factor`), a single-sided one only
+    from its front."""
     out = np.zeros((len(origin), 3))
     emitters = tracer.emitters
-    step = max(1, (1 << 20) // max(len(origin), 1))  # emitter triangles at a time
+    step = max(1, (1 << 16) // max(len(origin), 1))  # emitter triangles at a time
     for a in range(0, len(emitters), step):
         part = emitters[a : a + step]
         corners = np.tile(tracer.corners[part], (len(origin), 1, 1))
@@ -376,7 +377,7 @@ def _unoccluded_direct(tracer: Tracer, origin: np.ndarray, normal: np.ndarray) -
         factor = np.zeros(len(x))
         if seen.any():
             n = np.repeat(normal, len(part), axis=0)
-            factor[seen] = polygon_form_factor(corners[seen], x[seen], n[seen])
+            factor[seen] = numpy_polygon_form_factor(corners[seen], x[seen], n[seen])
         out += factor.reshape(len(origin), len(part)) @ tracer.emission[part]
     return out
 

@@ -200,14 +200,15 @@ def prepare(
     if balance.get("short_columns"):
         log.log(
             _short_level(mesh, engine.short_patches, float(balance["short_area"])),
-            "%d patches (%.2g%% of the surface) deliver up to %.0f%% less than they shoot: "
-            "surfaces face them from nearer than the receivers are spaced (a gap of "
-            "millimetres: a light facing the ceiling it hangs under?); their factors were "
-            "scaled up by %.2f at most, and what they miss counts as escaped in the energy "
-            "ledger",
+            "%d patches (%.2g%% of the surface) deliver less than they shoot, %.0f%% of it "
+            "at worst: surfaces face them from nearer than the receivers are spaced (a gap "
+            "of millimetres, as between a table's top and legs that stop just short of it, "
+            "or a light facing the ceiling it hangs under); balancing scales a patch's "
+            "factors up by %.2f at most, and what they miss counts as escaped in the "
+            "energy ledger",
             balance["short_columns"],
             100.0 * float(balance["short_area"]),
-            100.0 * float(balance["column_deficit"]),
+            100.0 * (1.0 - float(balance["column_deficit"])),
             COLUMN_SCALE_LIMIT,
         )
     return Prepared(scene, mesh, engine, occluder, timings, closed, balance)
