@@ -364,8 +364,9 @@ class FormFactorEngine:
         * a receiver whose whole hemisphere is covered by front faces (``closed``) has
           ``sum_p F_jp = 1``;
         * a patch delivers what it shoots, ``g_p = sum_j a_j F_jp / A_p``: exactly 1 when
-          every receiver of the patch is closed (its light has nowhere else to go), at
-          most 1 otherwise.
+          every receiver of the patch is closed (its light has nowhere else to go; unless
+          that takes scaling its factors up by more than ``COLUMN_SCALE_LIMIT``), at most 1
+          otherwise.
 
         At reflectance 0.999 a 0.1% row miss is 100% of radiosity (the
         furnace error is about rho delta / (1 - rho)), and a patch with rho g_p > 1
