@@ -371,7 +371,9 @@ def _add_common(parser: argparse.ArgumentParser, default_tolerance: float) -> No
         "area, and edges halve in steps and receivers split at creases, so meshes "
         "usually get 15-60%% more, up to about 90%% where many objects stand on "
         "surfaces (their contact outlines are imprinted; the summary and report.json "
-        "say how many; default: %(default)s)",
+        "say how many); every vertex of the scene is kept, so a finely tessellated "
+        "scene gets more (a room of 5 942 vertices, tools/cluttered_room.py: 14 177 at "
+        "3000) (default: %(default)s)",
     )
     add(
         "--max-edge",
