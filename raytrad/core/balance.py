@@ -119,6 +119,11 @@ class Balanced(NamedTuple):
     capture_after: np.ndarray
     row_sums: np.ndarray
 
+    def short(self, closed_columns: np.ndarray) -> np.ndarray:
+        """(P,) bool: the ``closed_columns`` held at :data:`COLUMN_SCALE_LIMIT`, short of
+        delivering what they shoot."""
+        return closed_columns & (self.column_scale >= COLUMN_SCALE_LIMIT)
+
     def summary(
         self,
         row_sum: np.ndarray,
@@ -140,7 +145,7 @@ class Balanced(NamedTuple):
         (largest g - 1 after it), ``column_deficit`` (largest 1 - g of the short patches
         after it) and ``iterations``.
         """
-        short = closed_columns & (self.column_scale >= COLUMN_SCALE_LIMIT)
+        short = self.short(closed_columns)
         area = float(patch_area.sum())
         return {
             "closed_rows": int(fixed_rows.sum()),

@@ -27,12 +27,7 @@ import numpy as np
 
 from raytrad.constants import scene_diagonal, tol
 from raytrad.core import stages
-from raytrad.core.balance import (
-    BALANCE_ITERATIONS,
-    COLUMN_SCALE_LIMIT,
-    balance_streamed,
-    closed_patches,
-)
+from raytrad.core.balance import BALANCE_ITERATIONS, balance_streamed, closed_patches
 from raytrad.core.columns import (
     Column,
     ColumnSpill,
@@ -427,14 +422,8 @@ class FormFactorEngine:
         """Patches by the order the form-factor pass computes them: emitters first, then
         by area x mean reflectance (what a shortened pass should have)."""
         m = self.mesh
-        emits = np.zeros(m.patch_count, dtype=bool)
-        np.logical_or.at(
-            emits,
-            m.triangle_patch,
-            (m.receiver_emitted_exitance[m.triangle_receivers] > 0).any(axis=(1, 2)),
-        )
         power = m.patch_area * m.patch_reflectance.mean(axis=1)
-        return np.lexsort((np.arange(m.patch_count), -power, ~emits))
+        return np.lexsort((np.arange(m.patch_count), -power, ~m.patch_emits()))
 
     def _balance(
         self,
@@ -464,7 +453,7 @@ class FormFactorEngine:
         self._final_rows = found.row_sums
         self.closed_rows = np.asarray(closed, dtype=bool)
         self.max_row_sum = float(self._final_rows.max(initial=0.0))
-        self.short_patches = closed_patch & (found.column_scale >= COLUMN_SCALE_LIMIT)
+        self.short_patches = found.short(closed_patch)
         return found.summary(sums, fix_rows, closed_patch, mesh.patch_area)
 
     def row_sums(self) -> np.ndarray:

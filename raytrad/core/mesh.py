@@ -129,6 +129,11 @@ class RadiosityMesh:
     def subarea_count(self) -> int:
         return int(self.subarea_area.shape[0])
 
+    def patch_emits(self) -> np.ndarray:
+        """(P,) bool: patches with a triangle that has an emitting corner."""
+        lit = (self.receiver_emitted_exitance[self.triangle_receivers] > 0).any(axis=(1, 2))
+        return np.bincount(self.triangle_patch[lit], minlength=self.patch_count) > 0
+
     def patch_subareas(self, patch: int) -> slice:
         """The slice of sub-area indices belonging to ``patch``."""
         lo, hi = np.searchsorted(self.subarea_patch, [patch, patch + 1])

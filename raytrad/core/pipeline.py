@@ -223,8 +223,7 @@ def _short_level(mesh: RadiosityMesh, short: np.ndarray, area: float) -> int:
     """The log level for patches balancing left short: a warning when they are at least
     :data:`SHORT_AREA_WARNING` of the surface or one emits (the light it loses is the
     scene's), else information (a table leg's top under the table, 0.08 % of a room)."""
-    emitting = (mesh.receiver_emitted_exitance[mesh.triangle_receivers] > 0).any(axis=(1, 2))
-    lit = bool(short[mesh.triangle_patch[emitting]].any())
+    lit = bool((short & mesh.patch_emits()).any())
     return logging.WARNING if lit or area >= SHORT_AREA_WARNING else logging.INFO
 
 

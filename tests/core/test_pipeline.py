@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from raytrad.core import pipeline
-from raytrad.core.mesh import MeshSettings
+from raytrad.core.mesh import MeshSettings, RadiosityMesh
 from raytrad.core.pipeline import RunBudget, error_samples, prepare
 from raytrad.core.solver import SolveSettings, solve
 from raytrad.scene import has_emission
@@ -299,7 +299,9 @@ def test_short_patches_are_warned_of_when_they_matter() -> None:
         receiver_emitted_exitance=np.array([[0.0] * 3, [0.0] * 3, [0.0] * 3, [5.0] * 3]),
         triangle_receivers=np.array([[0, 1, 2], [1, 2, 3]]),
         triangle_patch=np.array([0, 1]),
+        patch_count=2,
     )
+    mesh.patch_emits = lambda: RadiosityMesh.patch_emits(mesh)  # type: ignore[arg-type]
     level = pipeline._short_level
     assert level(mesh, np.array([True, False]), 8e-4) == logging.INFO
     assert level(mesh, np.array([True, False]), 2e-3) == logging.WARNING
