@@ -19,6 +19,22 @@ import math
 
 import numpy as np
 
+#: The helpers that allocate nothing and return no array, compiled without reference
+#: counting (see :func:`raytrad.core.compiled._jit`): the per-pair and per-triangle steps.
+BORROWING = (
+    "_unit_edge_term",
+    "edge_term",
+    "lambert",
+    "clipped_factor",
+    "outline_factor",
+    "_unit_outline_factor",
+    "clipped_outline",
+    "_edge_at",
+    "_linear_shares",
+    "_visible_centroid",
+    "_segment",
+)
+
 #: Every function to compile, each after the helpers it calls.
 KERNELS = (
     "_unit_edge_term",

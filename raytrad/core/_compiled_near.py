@@ -17,6 +17,11 @@ import numpy as np
 
 from raytrad.core import _compiled_kernels as _k
 
+#: The helpers that allocate nothing and return no array, compiled without reference
+#: counting (see :func:`raytrad.core.compiled._jit`): a near triangle's step alone passed
+#: some 20 arrays a call, each counted in and out.
+BORROWING = ("_triangle_corner_weights", "_cut", "_disk", "_triangle")
+
 #: Every function to compile, each after the helpers it calls.
 KERNELS = (
     "_triangle_corner_weights",

@@ -98,9 +98,10 @@ def _dispatchers(numba: Any) -> dict[str, Any]:
         _compiled_segments,
     )
     for loops in modules:
+        borrowing = getattr(loops, "BORROWING", ())
         for name in loops.KERNELS:
             if not hasattr(getattr(loops, name), "py_func"):  # not compiled yet
-                setattr(loops, name, _jit(numba, getattr(loops, name)))
+                setattr(loops, name, _jit(numba, getattr(loops, name), name in borrowing))
             kernels[name] = getattr(loops, name)
     return kernels
 
@@ -266,12 +267,22 @@ def _compile_named(names: list[str]) -> int:
     return 0
 
 
-def _jit(numba: Any, function: Any) -> Any:
+def _jit(numba: Any, function: Any, borrowing: bool = False) -> Any:
     """``numba.njit(cache=True, nogil=True)``, without the disk cache where numba finds no
     writable place for it (a read-only install and no home directory): compiled anew in
-    each process then, never an error."""
+    each process then, never an error.
+
+    A ``borrowing`` helper (a module's ``BORROWING``: it allocates nothing and returns no
+    array, so it only borrows its arguments) is compiled without numba's reference
+    counting (``_nrt=False``). numba otherwise counts a reference to every array it is
+    handed, tuples' members included, on each call, and the near field calls its
+    helpers once a triangle. Where numba refuses the option, the helper counts as before.
+    """
+    options: dict[str, Any] = {"nogil": True}
+    if borrowing and hasattr(numba.core.cpu.CPUTargetOptions, "_nrt"):
+        options["_nrt"] = False
     try:
-        return numba.njit(cache=True, nogil=True)(function)
+        return numba.njit(cache=True, **options)(function)
     except RuntimeError as error:  # numba: "cannot cache function ...: no locator"
         log.debug("numba cannot cache %s (%s): compiling without a cache", function, error)
-        return numba.njit(nogil=True)(function)
+        return numba.njit(**options)(function)

@@ -239,6 +239,40 @@ def test_listed_signatures_are_numba_signatures() -> None:
             assert [repr(t) for t in parsed] == arguments
 
 
+def test_borrowing_helpers_allocate_nothing_and_count_no_references() -> None:
+    # a helper compiled without reference counting must not allocate (numba would leak
+    # or refuse it) nor hand an array back; the others keep numba's counting
+    import inspect
+
+    import numba
+
+    from raytrad.core import _compiled_kernels, _compiled_near
+
+    kernels = compiled._dispatchers(numba)
+    for module in (_compiled_kernels, _compiled_near):
+        assert set(module.BORROWING) <= set(module.KERNELS)
+        for name in module.BORROWING:
+            source = inspect.getsource(kernels[name].py_func)
+            for allocation in ("np.empty", "np.zeros", "np.ones", "np.full", ".copy(", "_buffers("):
+                assert allocation not in source, (name, allocation)
+            assert kernels[name].targetoptions.get("_nrt") is False, name
+    assert "_nrt" not in kernels["near_triangles"].targetoptions  # it allocates its output
+
+
+def test_a_borrowing_helper_gives_what_the_counting_one_gives() -> None:
+    import numba
+
+    from raytrad.core import _compiled_kernels
+
+    tri, x, n = adversarial_pairs(np.random.default_rng(11), 400)
+    counting = numba.njit(nogil=True)(_compiled_kernels.clipped_factor.py_func)
+    work = np.empty((4, 3))
+    for i in range(len(tri)):
+        assert _compiled_kernels.clipped_factor(tri[i], x[i], n[i], work) == counting(
+            tri[i], x[i], n[i], work
+        )
+
+
 def test_share_out_balances_and_keeps_every_name() -> None:
     seconds = {"a": 5.0, "b": 3.0, "c": 2.0, "d": 1.0, "e": 1.0}
     groups = compiled.share_out(list(seconds), 2, seconds)
