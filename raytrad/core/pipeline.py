@@ -200,7 +200,7 @@ def prepare(
     if balance.get("short_columns"):
         log.log(
             _short_level(mesh, engine.short_patches, float(balance["short_area"])),
-            "%d patches (%.2g%% of the surface) deliver less than they shoot, %.0f%% of it "
+            "%d patches (%.2g%% of the surface) deliver less than they shoot, %s%% of it "
             "at worst: surfaces face them from nearer than the receivers are spaced (a gap "
             "of millimetres, as between a table's top and legs that stop just short of it, "
             "or a light facing the ceiling it hangs under); balancing scales a patch's "
@@ -208,10 +208,16 @@ def prepare(
             "energy ledger",
             balance["short_columns"],
             100.0 * float(balance["short_area"]),
-            100.0 * (1.0 - float(balance["column_deficit"])),
+            _percent(100.0 * (1.0 - float(balance["column_deficit"]))),
             COLUMN_SCALE_LIMIT,
         )
     return Prepared(scene, mesh, engine, occluder, timings, closed, balance)
+
+
+def _percent(value: float) -> str:
+    """A percentage for the log: whole from 1 on, else two significant digits (a table
+    leg's top under the table delivers 0.0012 % of what it shoots, not "0 %")."""
+    return f"{value:.0f}" if value >= 1.0 else f"{value:.2g}"
 
 
 #: The short patches' share of the surface (:meth:`FormFactorEngine.balance`) below which

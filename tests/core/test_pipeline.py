@@ -306,3 +306,14 @@ def test_short_patches_are_warned_of_when_they_matter() -> None:
     assert level(mesh, np.array([True, False]), 8e-4) == logging.INFO
     assert level(mesh, np.array([True, False]), 2e-3) == logging.WARNING
     assert level(mesh, np.array([False, True]), 1e-6) == logging.WARNING  # it emits
+
+
+def test_a_percentage_is_whole_from_one_and_small_ones_keep_two_digits() -> None:
+    assert [pipeline._percent(v) for v in (77.26, 1.0, 99.96, 0.00116, 0.5, 0.0)] == [
+        "77",
+        "1",
+        "100",
+        "0.0012",
+        "0.5",
+        "0",
+    ]
