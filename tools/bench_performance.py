@@ -8,8 +8,9 @@ Three parts:
    convex blockers (the default), with shaft culling alone and tracing every pair; the
    default and unculled passes are run again with their rays recorded, and those rays
    replayed through embreex's occlusion query, with the same threads, in the same
-   process. The last column sets each pass against raw Embree doing the unculled
-   pass's job: above 100% the pass finishes the job faster than Embree alone traces it.
+   process (beyond 2**25 rays, a sample of their batches, its time scaled by the
+   rays). The last column sets each pass against raw Embree doing the unculled pass's
+   job: above 100% the pass finishes the job faster than Embree alone traces it.
    ``rays / naive`` sets rays cast against receivers x samples of the pairs that see
    each other.
 2. **Compiled against numpy kernels; the solve.** The same pass with
@@ -49,6 +50,7 @@ import os
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -95,17 +97,55 @@ def _scene() -> Any:
     return api.load(_CHOSEN["scene"], RenderSettings()).scene
 
 
+#: Most rays a recorded pass keeps for the replay (32 bytes each: about 1 GiB). A pass
+#: casting more (a hall of four furnished rooms at 10 000 receivers: some 3e8, which took
+#: 24 GB) keeps a sample of its batches, and the replay's time is scaled by the rays.
+RECORDED_RAYS = 2**25
+
+
+class Recording:
+    """The ray batches of a pass, every ``stride``-th batch of those cast: when the kept
+    ones pass :data:`RECORDED_RAYS`, every other one is dropped and the stride doubled
+    (safe from the pass's threads)."""
+
+    def __init__(self, limit: int | None = None) -> None:
+        self.batches: list[tuple[int, tuple[np.ndarray, np.ndarray, np.ndarray]]] = []
+        self.limit = RECORDED_RAYS if limit is None else limit
+        self.stride, self.seen, self.rays, self.kept = 1, 0, 0, 0
+        self._lock = threading.Lock()
+
+    def add(self, o: np.ndarray, d: np.ndarray, t: np.ndarray) -> None:
+        with self._lock:
+            index, self.seen = self.seen, self.seen + 1
+            self.rays += len(o)
+            if index % self.stride:
+                return
+            self.batches.append(
+                (index, (np.array(o, np.float32), np.array(d, np.float32), np.array(t)))
+            )
+            self.kept += len(o)
+            while self.kept > self.limit and len(self.batches) > 1:
+                self.stride *= 2
+                self.batches = [b for b in self.batches if b[0] % self.stride == 0]
+                self.kept = sum(len(b[1][0]) for b in self.batches)
+
+    @property
+    def share(self) -> float:
+        """The kept rays' share of those cast [1]."""
+        return self.kept / self.rays if self.rays else 1.0
+
+
 def timed_pass(
     receivers: int, record: bool, cull: bool = True, convex: bool = True
-) -> tuple[float, object, list]:
-    """(seconds of the form-factor pass, the prepared scene, recorded ray batches);
+) -> tuple[float, object, Recording]:
+    """(seconds of the form-factor pass, the prepared scene, its recorded ray batches);
     ``convex`` False leaves the convex blockers out (shaft culling alone)."""
-    batches: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
+    recorded = Recording()
     original = Occluder.occluded_local
 
     def recording(self, o, d, t):  # type: ignore[no-untyped-def]
         if record:
-            batches.append((np.array(o, np.float32), np.array(d, np.float32), np.array(t)))
+            recorded.add(o, d, t)
         return original(self, o, d, t)
 
     Occluder.occluded_local = recording  # type: ignore[method-assign]
@@ -120,17 +160,25 @@ def timed_pass(
         Occluder.occluded_local = original  # type: ignore[method-assign]
         pipeline.FormFactorEngine = engine  # type: ignore[misc]
         pairs.blockers = find
-    return prepared.timings["form_factors"], prepared, batches
+    return prepared.timings["form_factors"], prepared, recorded
 
 
 def _replayed(receivers: int, cull: bool) -> tuple[float, int]:
     """(seconds, rays) of embreex answering a pass's occlusion queries, recorded in a run
-    of the pass of its own."""
-    _, prepared, batches = timed_pass(receivers, record=True, cull=cull)
+    of the pass of its own; from a sample of its batches beyond :data:`RECORDED_RAYS`,
+    the seconds scaled by the rays cast over the rays replayed (said on a line)."""
+    _, prepared, recorded = timed_pass(receivers, record=True, cull=cull)
     try:
-        return replay(prepared.occluder, batches)
+        seconds, rays = replay(prepared.occluder, [batch for _, batch in recorded.batches])
     finally:
         prepared.close()
+    if recorded.share < 1.0:
+        print(
+            f"(raw Embree from a sample: {rays:.3g} of {recorded.rays:.3g} rays, one batch "
+            f"in {recorded.stride}, {seconds:.2f} s scaled by {1 / recorded.share:.1f})"
+        )
+        seconds /= recorded.share
+    return seconds, recorded.rays
 
 
 def _dense(engine: object, patch: int) -> np.ndarray:
