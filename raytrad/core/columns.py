@@ -139,8 +139,8 @@ class ColumnSpill:
     def read_factors(self, patch: int) -> tuple[np.ndarray, np.ndarray] | None:
         """(receivers, factors) of a spilled column, its gather weights left on disk; or
         None. Balancing reads every spilled column's factors once a round (up to 100
-        rounds): a raw file takes about a twentieth of the time an ``.npz`` member does
-        (whose header numpy parses each time)."""
+        rounds): a raw file takes about a seventh of the time an ``.npz`` member does
+        (whose header numpy parses each time; 0.11 against 0.81 ms for 19 000 entries)."""
         path = self._paths.get(patch)
         if path is None:
             return None
@@ -174,9 +174,13 @@ def _write_factors(path: str, receivers: np.ndarray, factors: np.ndarray) -> Non
 def _read_factors(path: str) -> tuple[np.ndarray, np.ndarray]:
     """The receivers and factors :func:`_write_factors` wrote."""
     with open(path, "rb") as file:
-        count, receiver_size, factor_size = (int(v) for v in np.fromfile(file, np.int64, 3))
-        receivers = np.fromfile(file, _RECEIVER_TYPES[receiver_size], count)
-        factors = np.fromfile(file, _FACTOR_TYPES[factor_size], count)
+        header = np.fromfile(file, np.int64, 3)
+        known = len(header) == 3 and int(header[1]) in _RECEIVER_TYPES
+        if not (known and int(header[2]) in _FACTOR_TYPES):
+            raise OSError(f"{path}: not a spilled column's factors file")
+        count = int(header[0])
+        receivers = np.fromfile(file, _RECEIVER_TYPES[int(header[1])], count)
+        factors = np.fromfile(file, _FACTOR_TYPES[int(header[2])], count)
     if len(factors) != count:
         raise OSError(f"{path}: a spilled column's factors file is cut short")
     return receivers, factors

@@ -68,3 +68,21 @@ def test_a_factors_file_cut_short_is_an_error_not_a_short_column() -> None:
             spill.read_factors(0)
     finally:
         spill.close()
+
+
+def test_a_factors_file_with_a_bad_header_is_an_error() -> None:
+    spill = ColumnSpill()
+    try:
+        spill.write(0, _column(np.random.default_rng(2), 10, np.int32, np.float32))
+        path = os.path.join(spill.folder, "0.npz.factors")
+        with open(path, "r+b") as file:
+            file.seek(8)
+            file.write(np.int64(3).tobytes())  # no receivers of 3 bytes
+        with pytest.raises(OSError, match="not a spilled column"):
+            spill.read_factors(0)
+        with open(path, "wb") as file:
+            file.write(b"short")
+        with pytest.raises(OSError, match="not a spilled column"):
+            spill.read_factors(0)
+    finally:
+        spill.close()
