@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+from collections.abc import Iterator
 
 import numpy as np
 import pytest
@@ -57,32 +58,29 @@ def test_a_spilled_column_reads_back_the_same(count: int, index: type, value: ty
     assert folder and not os.path.exists(folder)
 
 
-def test_a_factors_file_cut_short_is_an_error_not_a_short_column() -> None:
+@pytest.fixture
+def spilled() -> Iterator[tuple[ColumnSpill, str]]:
+    """A spill holding one column of 100 entries as patch 0, and its factors file."""
     spill = ColumnSpill()
-    try:
-        spill.write(0, _column(np.random.default_rng(1), 100, np.int32, np.float32))
-        path = os.path.join(spill.folder, "0.npz.factors")
-        with open(path, "r+b") as file:
-            file.truncate(os.path.getsize(path) - 4)
-        with pytest.raises(OSError, match="cut short"):
-            spill.read_factors(0)
-    finally:
-        spill.close()
+    spill.write(0, _column(np.random.default_rng(1), 100, np.int32, np.float32))
+    yield spill, os.path.join(spill.folder, "0.npz.factors")
+    spill.close()
 
 
-def test_a_factors_file_with_a_bad_header_is_an_error() -> None:
-    spill = ColumnSpill()
-    try:
-        spill.write(0, _column(np.random.default_rng(2), 10, np.int32, np.float32))
-        path = os.path.join(spill.folder, "0.npz.factors")
-        with open(path, "r+b") as file:
-            file.seek(8)
-            file.write(np.int64(3).tobytes())  # no receivers of 3 bytes
-        with pytest.raises(OSError, match="not a spilled column"):
-            spill.read_factors(0)
-        with open(path, "wb") as file:
-            file.write(b"short")
-        with pytest.raises(OSError, match="not a spilled column"):
-            spill.read_factors(0)
-    finally:
-        spill.close()
+def test_a_factors_file_cut_short_is_an_error_not_a_short_column(spilled) -> None:
+    spill, path = spilled
+    with open(path, "r+b") as file:
+        file.truncate(os.path.getsize(path) - 4)
+    with pytest.raises(OSError, match="cut short"):
+        spill.read_factors(0)
+
+
+@pytest.mark.parametrize("header", [np.array([100, 3, 4]), np.array([100, 4, 2]), b"short"])
+def test_a_factors_file_with_a_bad_header_is_an_error(spilled, header) -> None:
+    spill, path = spilled
+    with open(path, "r+b") as file:
+        file.write(header if isinstance(header, bytes) else header.astype(np.int64).tobytes())
+        if isinstance(header, bytes):
+            file.truncate(len(header))
+    with pytest.raises(OSError, match="not a spilled column"):
+        spill.read_factors(0)
