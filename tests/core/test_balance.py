@@ -8,6 +8,9 @@ import pytest
 
 from raytrad.core import balance, compiled
 from raytrad.core.balance import (
+    BALANCE_CONVERGED,
+    BALANCE_ITERATIONS,
+    BALANCE_STALL,
     COLUMN_SCALE_LIMIT,
     balance_columns,
     balance_streamed,
@@ -131,3 +134,61 @@ def test_a_gap_narrower_than_the_receivers_is_not_balanced_by_far_factors(stream
     assert summary["short_columns"] == 1
     assert summary["short_area"] == pytest.approx(0.9 / 10.9)
     assert summary["column_deficit"] == pytest.approx(1.0 - capture[0])
+
+
+def test_balancing_stops_when_its_misses_stall_or_meet_the_tolerance() -> None:
+    assert balance.converged([0.3, 1e-4, BALANCE_CONVERGED])
+    assert not balance.converged([0.3, 1e-4, 2 * BALANCE_CONVERGED])
+    halving = [2.0**-k for k in range(25)]  # halves each round: never stalls (2**-25 > 1e-9)
+    assert not any(balance.converged(halving[: k + 1]) for k in range(25))
+    slow = [1e-3 * 0.95**k for k in range(40)]  # halves in 14 rounds: stalls after 10
+    stops = [k for k in range(len(slow)) if balance.converged(slow[: k + 1])]
+    assert stops[0] == BALANCE_STALL
+    # stalled far from the constraints (a light 1 mm under a ceiling): goes on
+    plateau = [0.3 * 0.99**k for k in range(40)]
+    assert not any(balance.converged(plateau[: k + 1]) for k in range(len(plateau)))
+
+
+def test_capture_miss_skips_short_and_empty_patches() -> None:
+    capture = np.array([0.5, 0.9, 1.2, 0.0, 0.7, 1.5])
+    scale = np.array([2.0, 1.0, 0.9, 1.0, COLUMN_SCALE_LIMIT, 1.0])
+    closed = np.array([True, True, False, True, True, False])
+    # g = 1.0, 0.9 (closed: misses 0.1), 1.08 (open: 0.08 over), nothing, 0.875 (held
+    # at the limit), 1.5 (open: 0.5 over)
+    assert balance.capture_miss(capture, scale, closed) == pytest.approx(0.5)
+    assert balance.capture_miss(capture[:5], scale[:5], closed[:5]) == pytest.approx(0.1)
+    assert balance.capture_miss(capture[4:5], scale[4:5], closed[4:5]) == 0.0
+
+
+@pytest.mark.parametrize("streamed", [True, False])
+def test_a_closed_scene_with_a_short_patch_stops_early_with_its_rows_held(streamed: bool) -> None:
+    """Every receiver closed and every patch closed, one patch short of delivering what it
+    shoots (its factors a third of the others'): the row and column constraints cannot all
+    hold, since sum_j a_j sum_p F'_jp = sum_p A_p g_p. Sinkhorn drifted for all its rounds
+    (the column scales creeping towards ones that would undo the limit); it now stops when
+    its misses stall, with the rows at 1 and the other patches capturing the short one's
+    deficit between them."""
+    rng = np.random.default_rng(11)
+    receivers, patches = 300, 40
+    dense = rng.random((receivers, patches)) * (rng.random((receivers, patches)) < 0.5)
+    dense /= dense.sum(axis=1, keepdims=True)
+    receiver_area = rng.uniform(0.5, 1.5, receivers)
+    patch_area = receiver_area @ dense  # sums to the receivers' area: only patch 0 is short
+    dense[:, 0] /= 3.0  # patch 0 captures a third of its area: short at scale 1.25
+    rows, cols = np.nonzero(dense.T)
+    pointer = np.searchsorted(rows, np.arange(patches + 1)).astype(np.int64)
+    fixed, closed = np.ones(receivers, bool), np.ones(patches, bool)
+    args = (pointer, cols, dense.T[rows, cols], receiver_area, patch_area, fixed, closed)
+    found = balance_columns(*args) if streamed else numpy_balance_columns(*args)
+    assert found.iterations < BALANCE_ITERATIONS
+    balanced = found.row_scale[:, None] * dense * found.column_scale[None, :]
+    np.testing.assert_allclose(balanced.sum(axis=1), 1.0, atol=1e-12)
+    capture = receiver_area @ balanced / patch_area
+    short = found.short(closed)
+    assert short[0] and short.sum() == 1
+    assert found.column_scale[0] == COLUMN_SCALE_LIMIT and capture[0] < 0.6
+    # the others capture the deficit between them, none much more than its even share
+    deficit = patch_area[0] * (1.0 - capture[0])
+    np.testing.assert_allclose(patch_area[1:] @ (capture[1:] - 1.0), deficit, rtol=1e-9)
+    even = deficit / patch_area[1:].sum()
+    assert 0.5 * even < (capture[1:] - 1.0).min() and (capture[1:] - 1.0).max() < 1.5 * even
