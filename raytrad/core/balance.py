@@ -67,14 +67,14 @@ def sinkhorn(
     fixed_rows: np.ndarray,
     closed_columns: np.ndarray,
     iterations: int = BALANCE_ITERATIONS,
-) -> tuple[np.ndarray, np.ndarray, int]:
+) -> tuple[np.ndarray, np.ndarray, int, str]:
     """Row and column scales that hold the ``fixed_rows`` to a sum of 1, the
     ``closed_columns`` to a capture of 1 (scaled up by :data:`COLUMN_SCALE_LIMIT` at most)
     and every other column to a capture of at most 1.
 
     The capture of patch p is ``g_p = sum_j a_j F_jp / A_p``. Rows and columns are scaled
     alternately until every capture is within :data:`BALANCE_CONVERGED` of its goal, or
-    the rounds stall (:func:`converged`); the rows are scaled last, so the fixed rows sum
+    the rounds stall (:func:`stop_reason`); the rows are scaled last, so the fixed rows sum
     to 1 to rounding.
 
     Parameters
@@ -93,11 +93,13 @@ def sinkhorn(
     row_scale : (R,) float64
     column_scale : (P,) float64
     iterations : int, rounds taken
+    stopped : str, why they stopped (:func:`stop_reason`, or ``"rounds"``: ``iterations``)
     """
     rows, owner, values = factors.rows, factors.columns, factors.values
     total = factors.column_count
     col_scale = np.ones(total)
     misses: list[float] = []
+    stopped = "rounds"
     while len(misses) < iterations:
         row_scale = _row_scales(factors, values * col_scale[owner], fixed_rows)
         weight = receiver_area * values * row_scale[rows]
@@ -109,9 +111,11 @@ def sinkhorn(
         )
         np.minimum(new_col, COLUMN_SCALE_LIMIT, out=new_col)
         col_scale = new_col
-        if converged(misses):
+        if stop_reason(misses):
+            stopped = stop_reason(misses)
             break
-    return _row_scales(factors, values * col_scale[owner], fixed_rows), col_scale, len(misses)
+    row_scale = _row_scales(factors, values * col_scale[owner], fixed_rows)
+    return row_scale, col_scale, len(misses), stopped
 
 
 def capture_miss(capture: np.ndarray, column_scale: np.ndarray, closed: np.ndarray) -> float:
@@ -133,14 +137,16 @@ def capture_miss(capture: np.ndarray, column_scale: np.ndarray, closed: np.ndarr
     return float(np.max(miss, where=capture > 0, initial=0.0))
 
 
-def converged(misses: list[float]) -> bool:
-    """Whether balancing stops after the rounds whose misses (:func:`capture_miss`) are
-    ``misses``: the last is within :data:`BALANCE_CONVERGED`, or within
-    :data:`BALANCE_STALL_MISS` and not half the one :data:`BALANCE_STALL` rounds before
-    it."""
+def stop_reason(misses: list[float]) -> str:
+    """Why balancing stops after the rounds whose misses (:func:`capture_miss`) are
+    ``misses``: ``"converged"``, the last is within :data:`BALANCE_CONVERGED`;
+    ``"stalled"``, it is within :data:`BALANCE_STALL_MISS` and not half the one
+    :data:`BALANCE_STALL` rounds before it; else ``""`` (it goes on)."""
     last = misses[-1]
+    if last <= BALANCE_CONVERGED:
+        return "converged"
     stalled = len(misses) > BALANCE_STALL and last > 0.5 * misses[-1 - BALANCE_STALL]
-    return bool(last <= BALANCE_CONVERGED or (stalled and last <= BALANCE_STALL_MISS))
+    return "stalled" if stalled and last <= BALANCE_STALL_MISS else ""
 
 
 class Balanced(NamedTuple):
@@ -153,6 +159,8 @@ class Balanced(NamedTuple):
     iterations : int
     capture_before, capture_after : (P,) float64, ``g_p`` before and after [1]
     row_sums : (R,) float64, ``sum_p F'_jp`` of the balanced factors [1]
+    stopped : str, why the rounds stopped: ``"converged"``, ``"stalled"``
+        (:func:`stop_reason`) or ``"rounds"`` (the most allowed)
     """
 
     row_scale: np.ndarray
@@ -161,6 +169,7 @@ class Balanced(NamedTuple):
     capture_before: np.ndarray
     capture_after: np.ndarray
     row_sums: np.ndarray
+    stopped: str = "rounds"
 
     def short(self, closed_columns: np.ndarray) -> np.ndarray:
         """(P,) bool: the ``closed_columns`` held at :data:`COLUMN_SCALE_LIMIT`, short of
@@ -173,7 +182,7 @@ class Balanced(NamedTuple):
         fixed_rows: np.ndarray,
         closed_columns: np.ndarray,
         patch_area: np.ndarray,
-    ) -> dict[str, float | bool]:
+    ) -> dict[str, float | bool | str]:
         """What balancing did, for the log and ``report.json``, from the raw ``row_sum``
         (R,), the ``fixed_rows`` (R,) and ``closed_columns`` (P,) it was given and the
         ``patch_area`` (P,) [m2].
@@ -186,7 +195,7 @@ class Balanced(NamedTuple):
         ``short_area`` (their share of the patches' area), ``row_error`` and
         ``capture_excess`` (largest deviations before balancing), ``column_excess``
         (largest g - 1 after it), ``column_deficit`` (largest 1 - g of the short patches
-        after it) and ``iterations``.
+        after it), ``iterations`` and ``stopped``.
         """
         short = self.short(closed_columns)
         area = float(patch_area.sum())
@@ -201,6 +210,7 @@ class Balanced(NamedTuple):
             "column_excess": float(max(0.0, self.capture_after.max(initial=0.0) - 1.0)),
             "column_deficit": float(max(0.0, 1.0 - self.capture_after[short].min(initial=1.0))),
             "iterations": self.iterations,
+            "stopped": self.stopped,
             "complete": True,
         }
 
@@ -251,6 +261,7 @@ def balance_streamed(
         capture0[p] = step.column_final(rows, values, area, ones, 1.0, row_sum) / patch_area[p]
     row_scale = _fixed_row_scales(row_sum, fixed_rows)
     misses: list[float] = []
+    stopped = "rounds"
     while len(misses) < iterations:
         row_sum[:] = 0.0
         new = np.ones(total)  # a patch with no entries captures nothing: scale 1
@@ -269,7 +280,8 @@ def balance_streamed(
         misses.append(capture_miss(capture, col_scale, closed_columns))
         col_scale = new
         row_scale = _fixed_row_scales(row_sum, fixed_rows)
-        if converged(misses):
+        if stop_reason(misses):
+            stopped = stop_reason(misses)
             break
     done = len(misses)
     row_sums = np.zeros(len(area))
@@ -277,7 +289,7 @@ def balance_streamed(
     for p, rows, values in columns():
         final = step.column_final(rows, values, area, row_scale, float(col_scale[p]), row_sums)
         capture[p] = final / patch_area[p]
-    return Balanced(row_scale, col_scale, done, capture0, capture, row_sums)
+    return Balanced(row_scale, col_scale, done, capture0, capture, row_sums, stopped)
 
 
 def balance_columns(
@@ -399,7 +411,7 @@ def numpy_balance_columns(
     owner = np.repeat(np.arange(total), np.diff(pointer))
     area = receiver_area[rows]
     capture0 = np.bincount(owner, weights=area * values, minlength=total) / patch_area
-    row_scale, col_scale, done = sinkhorn(
+    row_scale, col_scale, done, stopped = sinkhorn(
         Sparse(rows, owner, values, len(receiver_area), total),
         area,
         patch_area,
@@ -410,7 +422,7 @@ def numpy_balance_columns(
     final = values * col_scale[owner] * row_scale[rows]
     row_sums = np.bincount(rows, weights=final, minlength=len(receiver_area))
     capture = np.bincount(owner, weights=area * final, minlength=total) / patch_area
-    return Balanced(row_scale, col_scale, done, capture0, capture, row_sums)
+    return Balanced(row_scale, col_scale, done, capture0, capture, row_sums, stopped)
 
 
 def _row_scales(factors: Sparse, values: np.ndarray, fix: np.ndarray) -> np.ndarray:
@@ -445,8 +457,8 @@ __all__ = [
     "balance_streamed",
     "capture_miss",
     "closed_patches",
-    "converged",
     "numpy_balance_columns",
     "numpy_column_sweep",
     "sinkhorn",
+    "stop_reason",
 ]

@@ -64,7 +64,7 @@ AHEAD_PER_WORKER = 2
 
 
 #: What :meth:`FormFactorEngine.balance` reports when the pass was cut short.
-_UNBALANCED: dict[str, float | bool] = {
+_UNBALANCED: dict[str, float | bool | str] = {
     "closed_rows": 0,
     "closed_columns": 0,
     "capped_columns": 0,
@@ -75,6 +75,7 @@ _UNBALANCED: dict[str, float | bool] = {
     "column_excess": 0.0,
     "column_deficit": 0.0,
     "iterations": 0,
+    "stopped": "unbalanced",
 }
 
 
@@ -351,7 +352,7 @@ class FormFactorEngine:
         progress: Callable[[int, int], None] | None = None,
         iterations: int = BALANCE_ITERATIONS,
         stop: Callable[[], bool] | None = None,
-    ) -> dict[str, float | bool]:
+    ) -> dict[str, float | bool | str]:
         """Rescale the form factors so that they conserve energy exactly.
 
         Two physical constraints the sampled vertex-to-patch factors miss:
@@ -430,7 +431,7 @@ class FormFactorEngine:
         held: dict[int, tuple[np.ndarray, np.ndarray]],
         closed: np.ndarray | None,
         iterations: int,
-    ) -> dict[str, float | bool]:
+    ) -> dict[str, float | bool | str]:
         mesh = self.mesh
         sums = self._row_sum.copy()
         if closed is None:

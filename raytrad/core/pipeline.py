@@ -52,6 +52,14 @@ PASS_LOG_SECONDS = 10.0
 #: (a quarter of the pass, if that is fewer).
 PASS_RATE_COLUMNS = 16
 
+#: The balancing log line's words for ``form_factor_balance.stopped``.
+_STOPPED = {
+    "converged": "converged",
+    "stalled": "stopped when they stalled: where nearly every receiver sees surfaces all "
+    "round, its rows and columns cannot all hold",
+    "rounds": "the most allowed",
+}
+
 
 @dataclass
 class Prepared:
@@ -80,7 +88,7 @@ class Prepared:
     occluder: Occluder | None
     timings: dict[str, float]
     closed_receivers: np.ndarray | None = None
-    balance: dict[str, float] = field(default_factory=dict)
+    balance: dict[str, float | bool | str] = field(default_factory=dict)
 
     def close(self) -> None:
         """Release the thread pools and the acceleration structure."""
@@ -189,9 +197,12 @@ def prepare(
         balance = engine.balance(closed, column_done, stop=stop)
     if balance["complete"]:
         log.info(
-            "form factors balanced: %d receivers that see surfaces all round have their "
-            "factors summed to 1 (largest correction %.2e); %d patches whose factors sent "
-            "out more than they shoot were scaled down (largest excess %.2e)",
+            "form factors balanced in %d rounds (%s): %d receivers that see surfaces all "
+            "round have their factors summed to 1 (largest correction %.2e); %d patches "
+            "whose factors sent out more than they shoot were scaled down (largest excess "
+            "%.2e)",
+            balance["iterations"],
+            _STOPPED.get(str(balance["stopped"]), str(balance["stopped"])),
             balance["closed_rows"],
             balance["row_error"],
             balance["capped_columns"],
