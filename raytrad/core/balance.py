@@ -99,7 +99,7 @@ def sinkhorn(
     total = factors.column_count
     col_scale = np.ones(total)
     misses: list[float] = []
-    stopped = "rounds"
+    stopped = ""
     while len(misses) < iterations:
         row_scale = _row_scales(factors, values * col_scale[owner], fixed_rows)
         weight = receiver_area * values * row_scale[rows]
@@ -111,11 +111,11 @@ def sinkhorn(
         )
         np.minimum(new_col, COLUMN_SCALE_LIMIT, out=new_col)
         col_scale = new_col
-        if stop_reason(misses):
-            stopped = stop_reason(misses)
+        stopped = stop_reason(misses)
+        if stopped:
             break
     row_scale = _row_scales(factors, values * col_scale[owner], fixed_rows)
-    return row_scale, col_scale, len(misses), stopped
+    return row_scale, col_scale, len(misses), stopped or "rounds"
 
 
 def capture_miss(capture: np.ndarray, column_scale: np.ndarray, closed: np.ndarray) -> float:
@@ -169,7 +169,7 @@ class Balanced(NamedTuple):
     capture_before: np.ndarray
     capture_after: np.ndarray
     row_sums: np.ndarray
-    stopped: str = "rounds"
+    stopped: str
 
     def short(self, closed_columns: np.ndarray) -> np.ndarray:
         """(P,) bool: the ``closed_columns`` held at :data:`COLUMN_SCALE_LIMIT`, short of
@@ -261,7 +261,7 @@ def balance_streamed(
         capture0[p] = step.column_final(rows, values, area, ones, 1.0, row_sum) / patch_area[p]
     row_scale = _fixed_row_scales(row_sum, fixed_rows)
     misses: list[float] = []
-    stopped = "rounds"
+    stopped = ""
     while len(misses) < iterations:
         row_sum[:] = 0.0
         new = np.ones(total)  # a patch with no entries captures nothing: scale 1
@@ -280,8 +280,8 @@ def balance_streamed(
         misses.append(capture_miss(capture, col_scale, closed_columns))
         col_scale = new
         row_scale = _fixed_row_scales(row_sum, fixed_rows)
-        if stop_reason(misses):
-            stopped = stop_reason(misses)
+        stopped = stop_reason(misses)
+        if stopped:
             break
     done = len(misses)
     row_sums = np.zeros(len(area))
@@ -289,7 +289,7 @@ def balance_streamed(
     for p, rows, values in columns():
         final = step.column_final(rows, values, area, row_scale, float(col_scale[p]), row_sums)
         capture[p] = final / patch_area[p]
-    return Balanced(row_scale, col_scale, done, capture0, capture, row_sums, stopped)
+    return Balanced(row_scale, col_scale, done, capture0, capture, row_sums, stopped or "rounds")
 
 
 def balance_columns(
