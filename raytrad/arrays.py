@@ -33,3 +33,49 @@ def unique(values: np.ndarray) -> np.ndarray:
     keep[0] = True
     np.not_equal(flat[1:], flat[:-1], out=keep[1:])
     return flat[keep]
+
+
+def morton_order(points: np.ndarray, bits: int = 21) -> np.ndarray:
+    """(N,) int64 permutation that puts ``points`` ((N, 3) float) in Morton (Z-curve)
+    order over their bounding box: points near each other in space come near each other
+    in the permutation, wherever the points lie and whatever their units.
+
+    Each coordinate is quantised to ``bits`` (at most 21) bits across the box and the
+    bits interleaved; ties keep their input order (stable).
+    """
+    points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    if len(points) == 0:
+        return np.zeros(0, dtype=np.int64)
+    lo = points.min(axis=0)
+    span = float((points.max(axis=0) - lo).max())
+    scale = ((1 << bits) - 1) / span if span > 0 else 0.0
+    cells = np.clip((points - lo) * scale, 0, (1 << bits) - 1).astype(np.uint64)
+    code = np.zeros(len(points), dtype=np.uint64)
+    for axis in range(3):
+        code |= _spread_bits(cells[:, axis]) << np.uint64(2 - axis)
+    return np.argsort(code, kind="stable")
+
+
+def _spread_bits(values: np.ndarray) -> np.ndarray:
+    """Each value's low 21 bits spread two zero bits apart (bit k to bit 3k)."""
+    v = values & np.uint64(0x1FFFFF)
+    for shift, mask in (
+        (32, 0x1F00000000FFFF),
+        (16, 0x1F0000FF0000FF),
+        (8, 0x100F00F00F00F00F),
+        (4, 0x10C30C30C30C30C3),
+        (2, 0x1249249249249249),
+    ):
+        v = (v | (v << np.uint64(shift))) & np.uint64(mask)
+    return v
+
+
+def spatially_ordered(points: np.ndarray, indices: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``points`` ((N, 3)) renumbered in :func:`morton_order`, and ``indices`` (any
+    shape, int, into ``points``) renumbered to match: for a mesh's vertices and
+    triangles, consecutive vertices (and the receivers numbered by them) then lie in one
+    part of the scene, so a chunk of consecutive receivers casts coherent rays."""
+    order = morton_order(points)
+    rank = np.empty_like(order)
+    rank[order] = np.arange(len(order))
+    return points[order], rank[indices]

@@ -1,11 +1,12 @@
-"""raytrad.arrays: the sort-based unique against numpy's own."""
+"""raytrad.arrays: the sort-based unique against numpy's own; Morton order against a
+bit-by-bit reference."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from raytrad.arrays import unique
+from raytrad.arrays import morton_order, spatially_ordered, unique
 
 
 @pytest.mark.parametrize(
@@ -30,3 +31,49 @@ def test_unique_leaves_its_input_alone() -> None:
     values = np.array([3, 1, 3, 2])
     unique(values)
     np.testing.assert_array_equal(values, [3, 1, 3, 2])
+
+
+def _morton_code_bitwise(cell: tuple[int, int, int], bits: int) -> int:
+    """Reference: interleave bit k of x, y, z into bits 3k+2, 3k+1, 3k, one at a time."""
+    code = 0
+    for k in range(bits):
+        for axis in range(3):
+            code |= ((cell[axis] >> k) & 1) << (3 * k + 2 - axis)
+    return code
+
+
+def test_morton_order_of_a_2x2x2_grid_is_the_z_curve() -> None:
+    cells = np.array([(x, y, z) for z in (0, 1) for y in (0, 1) for x in (0, 1)], float)
+    order = morton_order(cells)
+    codes = [_morton_code_bitwise(tuple(int(c) for c in cells[i] * (2**21 - 1)), 21) for i in order]
+    assert codes == sorted(codes)
+    # x is the most significant axis within a level: (0,0,0), (0,0,1), (0,1,0), ...
+    np.testing.assert_array_equal(cells[order][:4], [(0, 0, 0), (0, 0, 1), (0, 1, 0), (0, 1, 1)])
+
+
+def test_morton_order_matches_bitwise_codes_and_is_a_stable_permutation() -> None:
+    rng = np.random.default_rng(5)
+    cells = rng.integers(0, 16, (500, 3))  # many ties
+    order = morton_order(cells.astype(float) * (2**21 - 1) / 15, bits=21)
+    assert sorted(order.tolist()) == list(range(500))
+    scaled = np.rint(cells * (2**21 - 1) / 15).astype(int)
+    codes = np.array([_morton_code_bitwise(tuple(c), 21) for c in scaled])
+    expected = np.argsort(codes, kind="stable")
+    np.testing.assert_array_equal(order, expected)
+
+
+def test_morton_order_ignores_translation_and_units() -> None:
+    points = np.random.default_rng(6).uniform(-1, 1, (1000, 3))
+    order = morton_order(points)
+    np.testing.assert_array_equal(morton_order(points * 1e-3 + 1e3), order)
+    assert len(morton_order(np.zeros((0, 3)))) == 0
+    np.testing.assert_array_equal(morton_order(np.ones((4, 3))), np.arange(4))
+
+
+def test_spatially_ordered_keeps_every_triangle() -> None:
+    rng = np.random.default_rng(7)
+    points = rng.uniform(0, 1, (50, 3))
+    triangles = rng.integers(0, 50, (80, 3))
+    new_points, new_triangles = spatially_ordered(points, triangles)
+    np.testing.assert_array_equal(new_points[new_triangles], points[triangles])
+    np.testing.assert_array_equal(new_points, points[morton_order(points)])

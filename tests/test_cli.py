@@ -41,8 +41,11 @@ def test_render_furnace(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> N
     assert status == 0, err
     positions, triangles, radiosity = read_radiosity_ply(out / "furnace.ply")
     assert len(positions) > 500 and len(triangles) > 500
-    np.testing.assert_allclose(radiosity, 2.0, rtol=2e-3)  # twice the default tolerance
     report = json.loads((out / "report.json").read_text())
+    # The default tolerance bounds the unshot power (1e-3 of the emitted), not the
+    # pointwise error, which is largest in the corners; the report's bound holds it.
+    worst = np.abs(radiosity - 2.0).max()
+    assert 0 < worst <= min(report["error"]["bound_max"]) and worst < 5e-3 * 2.0
     assert report["solve"]["stop_reason"] == "converged"
     assert report["solve"]["residual"] <= 1e-3
     assert report["statistics"]["receivers"] == len(positions)
@@ -60,11 +63,12 @@ def test_render_furnace(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> N
 def test_no_imprint_is_a_mesh_setting(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     out = tmp_path / "out"
     argv = ["render", str(FURNACE_OBJ), "-o", str(out), *SMALL, "--no-imprint"]
+    argv += ["--tolerance", "1e-4"]
     status, _, err = run_cli(argv, capsys)
     assert status == 0, err
     report = json.loads((out / "report.json").read_text())
     assert report["settings"]["mesh"]["imprint"] is False
-    np.testing.assert_allclose(read_radiosity_ply(out / "furnace.ply")[2], 2.0, rtol=2e-3)
+    np.testing.assert_allclose(read_radiosity_ply(out / "furnace.ply")[2], 2.0, rtol=2.5e-4)
 
 
 def test_max_shots_stops_early_and_says_so(

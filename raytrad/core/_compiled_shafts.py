@@ -22,10 +22,14 @@ KERNELS = (
     "_heights",
     "_sheet_hides",
     "_solid_hides",
+    "_group_candidates",
     "blocked_pairs",
 )
 
 FACE, HOLE, SHEET, EDGE = 0, 1, 2, 3
+#: Origins per group of :func:`blocked_pairs`, which share one list of candidate
+#: blockers.
+BLOCKER_GROUP = 16
 
 #: The index of a word's lowest set bit ``low`` (the word with only that bit) is
 #: ``_BIT_INDEX[(low * _DE_BRUIJN) >> 58]``: each 6-bit window of this de Bruijn sequence
@@ -113,50 +117,102 @@ def blocked_pairs(
     lift,
 ):
     """(N,) bool: origins from which one blocker hides every corner (see
-    :func:`raytrad.core.blockers.numpy_blocked`); the blocker that hid the last origin
-    is tried first."""
+    :func:`raytrad.core.blockers.numpy_blocked`).
+
+    The origins go in groups of :data:`BLOCKER_GROUP` consecutive ones (the pass's
+    receivers are in Morton order, so a group lies in one part of the scene): a blocker
+    whose sphere does not come within its radius + ``reach`` + the group's radius of the
+    segment from the group's centre to the patch's misses every origin's capsule, and only
+    the others are tried per origin, the one that hid the last origin first."""
     out = np.zeros(len(origins), dtype=np.bool_)
     h_v = _heights(corners, normal, offset)
     h_o = np.empty(len(offset))
     count = len(radius)
-    recent = np.int64(0)  # the blocker that hid the last origin: tried first
-    for i in range(len(origins)):
-        o = origins[i]
-        dx = patch_center[0] - o[0]
-        dy = patch_center[1] - o[1]
-        dz = patch_center[2] - o[2]
-        length2 = dx * dx + dy * dy + dz * dz
-        # the capsule test only chooses which blockers get the exact test, so its rounding
-        # (a product by the inverse, squares; 0.80 of the division's and root's time) may
-        # differ from the reference's: a blocker passed over leaves the pair traced, to
-        # the same factor
-        inverse = 1.0 / length2 if length2 > 0.0 else 0.0
-        gap = math.sqrt(length2) - reach
-        for step in range(count):
-            b = step - 1 if 0 < step <= recent else step  # recent, then the rest in order
-            if step == 0:
-                b = recent
-            cx, cy, cz = center[b, 0] - o[0], center[b, 1] - o[1], center[b, 2] - o[2]
-            t = min(max((cx * dx + cy * dy + cz * dz) * inverse, 0.0), 1.0)
-            ex, ey, ez = cx - t * dx, cy - t * dy, cz - t * dz
-            if ex * ex + ey * ey + ez * ez > (radius[b] + reach) ** 2:
-                continue
-            lo, hi = plane_ptr[b], plane_ptr[b + 1]
-            for k in range(lo, hi):
-                h_o[k] = o[0] * normal[k, 0] + o[1] * normal[k, 1] + o[2] * normal[k, 2] - offset[k]
-            sheet = False
-            for k in range(lo, hi):
-                if kind[k] == SHEET:
-                    sheet = True
-            if sheet:
-                hides = _sheet_hides(h_o, h_v, kind, lo, hi, margin)
-            else:
-                hides = _solid_hides(h_o, h_v, kind, lo, hi, margin, lift, gap)
-            if hides:
-                out[i] = True
-                recent = b
-                break
+    candidates = np.empty(count, dtype=np.int64)
+    recent = np.int64(-1)  # the blocker that hid the last origin: tried first
+    for first in range(0, len(origins), BLOCKER_GROUP):
+        last = min(first + BLOCKER_GROUP, len(origins))
+        found = _group_candidates(
+            origins, first, last, patch_center, reach, center, radius, candidates
+        )
+        for i in range(first, last):
+            o = origins[i]
+            dx = patch_center[0] - o[0]
+            dy = patch_center[1] - o[1]
+            dz = patch_center[2] - o[2]
+            length2 = dx * dx + dy * dy + dz * dz
+            # the capsule test only chooses which blockers get the exact test, so its
+            # rounding (a product by the inverse, squares; 0.80 of the division's and
+            # root's time) may differ from the reference's: a blocker passed over leaves
+            # the pair traced, to the same factor
+            inverse = 1.0 / length2 if length2 > 0.0 else 0.0
+            gap = math.sqrt(length2) - reach
+            for step in range(-1, found):
+                if step < 0:
+                    b = recent
+                    if b < 0:
+                        continue
+                else:
+                    b = candidates[step]
+                    if b == recent:
+                        continue
+                cx, cy, cz = center[b, 0] - o[0], center[b, 1] - o[1], center[b, 2] - o[2]
+                t = min(max((cx * dx + cy * dy + cz * dz) * inverse, 0.0), 1.0)
+                ex, ey, ez = cx - t * dx, cy - t * dy, cz - t * dz
+                if ex * ex + ey * ey + ez * ez > (radius[b] + reach) ** 2:
+                    continue
+                lo, hi = plane_ptr[b], plane_ptr[b + 1]
+                for k in range(lo, hi):
+                    h_o[k] = (
+                        o[0] * normal[k, 0] + o[1] * normal[k, 1] + o[2] * normal[k, 2] - offset[k]
+                    )
+                sheet = False
+                for k in range(lo, hi):
+                    if kind[k] == SHEET:
+                        sheet = True
+                if sheet:
+                    hides = _sheet_hides(h_o, h_v, kind, lo, hi, margin)
+                else:
+                    hides = _solid_hides(h_o, h_v, kind, lo, hi, margin, lift, gap)
+                if hides:
+                    out[i] = True
+                    recent = b
+                    break
     return out
+
+
+def _group_candidates(origins, first, last, patch_center, reach, center, radius, candidates):
+    """The blockers whose capsule test any origin ``first:last`` could pass, written to
+    ``candidates``; returns their count. Every segment from an origin within ``r`` of a
+    point ``g`` to the patch's centre lies within ``r`` of the segment from ``g`` (the
+    two differ by ``(1 - t) (o - g)`` at each parameter ``t``)."""
+    gx, gy, gz = 0.0, 0.0, 0.0
+    for i in range(first, last):
+        gx += origins[i, 0]
+        gy += origins[i, 1]
+        gz += origins[i, 2]
+    share = 1.0 / (last - first)
+    gx, gy, gz = gx * share, gy * share, gz * share
+    spread = 0.0
+    for i in range(first, last):
+        ox, oy, oz = origins[i, 0] - gx, origins[i, 1] - gy, origins[i, 2] - gz
+        spread = max(spread, ox * ox + oy * oy + oz * oz)
+    # a relative slack for the rounding of the centre and of the tests against it
+    spread = math.sqrt(spread) * (1.0 + 1e-9) + 1e-9 * (
+        reach + math.sqrt(gx * gx + gy * gy + gz * gz)
+    )
+    dx, dy, dz = patch_center[0] - gx, patch_center[1] - gy, patch_center[2] - gz
+    length2 = dx * dx + dy * dy + dz * dz
+    found = 0
+    for b in range(len(radius)):
+        cx, cy, cz = center[b, 0] - gx, center[b, 1] - gy, center[b, 2] - gz
+        t = (cx * dx + cy * dy + cz * dz) / length2 if length2 > 0.0 else 0.0
+        t = min(max(t, 0.0), 1.0)
+        ex, ey, ez = cx - t * dx, cy - t * dy, cz - t * dz
+        if math.sqrt(ex * ex + ey * ey + ez * ez) <= radius[b] + reach + spread:
+            candidates[found] = b
+            found += 1
+    return found
 
 
 def shaft_clear(

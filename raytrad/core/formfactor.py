@@ -25,6 +25,7 @@ from typing import TypeVar, overload
 
 import numpy as np
 
+from raytrad.arrays import morton_order
 from raytrad.constants import scene_diagonal, tol
 from raytrad.core import stages
 from raytrad.core.balance import BALANCE_ITERATIONS, balance_streamed, closed_patches
@@ -561,9 +562,15 @@ class FormFactorEngine:
     ) -> GatherRows | None:
         """The balanced factors and near-field weights of new points to every patch, kept
         to gather from several radiosities (:func:`gathered_irradiance`) without tracing
-        again; None when ``stop``, polled after each patch, says stop (the rest cancelled)."""
+        again; None when ``stop``, polled after each patch, says stop (the rest cancelled).
+
+        The points are taken in Morton order (:func:`~raytrad.arrays.morton_order`), as
+        the mesh numbers its receivers, so that a chunk's points and rays lie in one part
+        of the scene; the rows index the points as given."""
         points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
         normals = np.asarray(normals, dtype=np.float64).reshape(-1, 3)
+        order = morton_order(points)
+        points, normals = points[order], normals[order]
         origins = points + tol.ray_offset * self.diagonal * normals
         sides = self._pairs.sides(origins)
         levels = np.einsum("ij,ij->i", normals, points)
@@ -573,7 +580,7 @@ class FormFactorEngine:
             near = self._candidates(patch, points, normals, levels)
             part = None if sides is None else sides[near]
             found = self._factors(points[near], normals[near], origins[near], patch, part)
-            return near, found[0], found[1], compact_gather(found[2], self._index)
+            return order[near], found[0], found[1], compact_gather(found[2], self._index)
 
         patches = list(range(self.mesh.patch_count))
         done = self._per_patch(work, patches)

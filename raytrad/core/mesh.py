@@ -20,7 +20,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from raytrad.arrays import unique
+from raytrad.arrays import spatially_ordered, unique
 from raytrad.constants import scene_diagonal, scene_extent, tol
 from raytrad.core.imprint import Outlines, imprint_outlines, outline_segments
 from raytrad.core.intersections import intersection_segments
@@ -253,6 +253,7 @@ def build_mesh(
         area[keep],
         normal[keep],
     )
+    positions, fine = spatially_ordered(positions, fine)  # receivers coherent in space
     receivers = surface_receivers(positions, fine, fine_surface, area, normal)
     triangle_receivers, r_pos, r_normal, r_area, r_inward = receivers
     tri_material = material[parent]

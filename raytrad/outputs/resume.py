@@ -26,7 +26,8 @@ from raytrad.scene import Scene, scene_digests
 log = logging.getLogger(__name__)
 
 #: Version of the checkpoint layout; a checkpoint of another layout is refused.
-LAYOUT = 4  # 4: gather sources beyond the receivers are cluster-tree nodes
+LAYOUT = 5  # 4: gather sources beyond the receivers are cluster-tree nodes; 5: receivers
+# numbered in Morton order (a column of layout 4 indexes another numbering)
 #: Prefix of the arrays holding the columns of a form-factor pass cut short.
 PASS = "pass_"
 

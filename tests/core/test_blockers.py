@@ -10,6 +10,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from raytrad.arrays import morton_order
 from raytrad.constants import tol
 from raytrad.core import blockers as bl
 from raytrad.core import compiled
@@ -149,17 +150,45 @@ def random_blockers(rng: np.random.Generator) -> bl.Blockers:
 
 @pytest.mark.skipif(compiled.get() is None, reason="needs the compiled kernels")
 @pytest.mark.parametrize("seed", range(4))
-def test_compiled_test_matches_numpy(seed: int) -> None:
+@pytest.mark.parametrize("ordered", [False, True])
+def test_compiled_test_matches_numpy(seed: int, ordered: bool) -> None:
+    """Scattered origins, and origins in Morton order as the pass hands them: groups of
+    nearby origins, whose shared candidate blockers must leave out none that hides."""
     rng = np.random.default_rng(seed)
     found = random_blockers(rng)
     hits = 0
     for _ in range(20):
         quad = PATCH + rng.uniform(-1, 1, 3) + [0, 0, rng.uniform(0, 4)]
         origins = rng.uniform(-5, 5, (400, 3)) - [0, 0, 4]
+        if ordered:
+            origins = origins[morton_order(origins)]
         fast, reference = classify(found, origins, quad)
         np.testing.assert_array_equal(fast, reference)
         hits += int(fast.sum())
     assert hits > 0
+
+
+@pytest.mark.skipif(compiled.get() is None, reason="needs the compiled kernels")
+def test_grouped_origins_among_many_blockers_match_numpy() -> None:
+    """40 small boxes between a patch and a cloud of origins in Morton order: most boxes
+    are far from a group's shaft, and the groups' candidate lists must keep every box
+    that hides a patch from one of their origins."""
+    rng = np.random.default_rng(7)
+    parts = [
+        box(rng.uniform(-3, 3, 3) * [1, 1, 0.3] + [0, 0, 1.5], rng.uniform(0.2, 0.6, 3), 0.0)
+        for _ in range(40)
+    ]
+    found = bl.blockers(*join(*parts), DIAGONAL)
+    assert found is not None and found.count == 40
+    origins = rng.uniform(-4, 4, (3000, 3)) * [1, 1, 0.2]
+    origins = origins[morton_order(origins)]
+    hits = 0
+    for _ in range(6):
+        quad = PATCH * 0.3 + rng.uniform(-2, 2, 3) * [1, 1, 0] + [0, 0, 3.5]
+        fast, reference = classify(found, origins, quad)
+        np.testing.assert_array_equal(fast, reference)
+        hits += int(fast.sum())
+    assert 0.05 < hits / (6 * len(origins)) < 0.95  # both kinds occur
 
 
 @pytest.fixture(scope="module", params=[1, 2])
