@@ -450,7 +450,7 @@ def test_time_limit_bounds_the_form_factor_pass(
     solved = report["refinement"]["receivers_solved"]
     quick = error_samples(solved, quick=True)[0]
     assert 0.9 * quick <= error["samples"] <= quick < error_samples(solved)[0]
-    assert "the discretisation check counts the unfinished solve too" in summary
+    assert "the discretisation figure includes the unfinished solve's own error" in summary
     solve = report["solve"]
     assert solve["stop_reason"] == "time-limit"
     # every lamp patch shot once, nothing else: the lamp is a few patches of 80

@@ -189,7 +189,10 @@ def _named_below(error: dict[str, Any]) -> str:
 
     largest = max(parts, key=worst, default=None)
     if largest == "discretisation" and error.get("dominant") == "algebraic":
-        return "; the discretisation check counts the unfinished solve too"
+        return (
+            "; the discretisation figure includes the unfinished solve's own error, so it "
+            "is named only above twice the algebraic"
+        )
     return ""
 
 

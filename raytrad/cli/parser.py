@@ -369,7 +369,8 @@ def _add_common(parser: argparse.ArgumentParser, default_tolerance: float) -> No
         metavar="N",
         help="target receiver (vertex) count: it sets the longest edge from the scene's "
         "area, and edges halve in steps and receivers split at creases, so meshes "
-        "usually get 15-60%% more, up to about 90%% where many objects stand on "
+        "usually get up to 60%% more (the Cornell box: 25 911 at 20 000, 59 786 at "
+        "60 000), up to about 90%% where many objects stand on "
         "surfaces (their contact outlines are imprinted; the summary and report.json "
         "say how many); every vertex of the scene is kept, so a finely tessellated "
         "scene gets more (a room of 5 942 vertices, tools/cluttered_room.py: 14 177 at "
