@@ -19,7 +19,9 @@ import ctypes
 import logging
 import os
 import tempfile
+from collections.abc import Iterator, Mapping
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -260,28 +262,29 @@ def pack_columns(parts: list[dict[str, np.ndarray]]) -> dict[str, np.ndarray]:
     }
 
 
-def unpack_columns(packed: dict[str, np.ndarray], index: type) -> list[tuple[int, Column]]:
-    """(patch, column) pairs from :func:`pack_columns`' arrays; receiver indices as
-    ``index`` (int32 or int64), raw factors as float32."""
+def unpack_columns(packed: Mapping[str, Any], index: type) -> Iterator[tuple[int, Column]]:
+    """(patch, column) pairs from :func:`pack_columns`' arrays, one at a time; receiver
+    indices as ``index`` (int32 or int64), raw factors as float32. ``packed``'s arrays are
+    ndarrays or anything a plain slice of which is one (a checkpoint's
+    :class:`~raytrad.formats.checkpoint.StoredArray`, read a column at a time)."""
     ends = {
         name: np.concatenate([[0], np.cumsum(packed[name])])
         for name in ("length", "near_length", "source_length")
     }
-    out = []
-    for i, patch in enumerate(packed["patch"].tolist()):
+    for i, patch in enumerate(np.asarray(packed["patch"]).tolist()):
         a, b = ends["length"][i : i + 2]
         g, h = ends["near_length"][i : i + 2]
         u, v = ends["source_length"][i : i + 2]
         gather = GatherWeights(
-            packed["near_receivers"][g:h].astype(index),
-            packed["near_factors"][g:h],
+            np.asarray(packed["near_receivers"][g:h]).astype(index),
+            np.asarray(packed["near_factors"][g:h]),
             np.concatenate([[0], packed["near_pointer"][g:h]]).astype(np.int64),
-            packed["sources"][u:v].astype(index),
-            packed["weights"][u:v].astype(np.float32),
+            np.asarray(packed["sources"][u:v]).astype(index),
+            np.asarray(packed["weights"][u:v]).astype(np.float32),
         )
-        receivers: np.ndarray = packed["receivers"][a:b].astype(index)
-        out.append((patch, Column(receivers, packed["factors"][a:b].astype(np.float32), 0, gather)))
-    return out
+        receivers: np.ndarray = np.asarray(packed["receivers"][a:b]).astype(index)
+        factors = np.asarray(packed["factors"][a:b]).astype(np.float32)
+        yield patch, Column(receivers, factors, 0, gather)
 
 
 __all__ = [

@@ -19,9 +19,9 @@ from __future__ import annotations
 import itertools
 import logging
 import threading
-from collections.abc import Callable, Generator, Iterable, Iterator
+from collections.abc import Callable, Generator, Iterable, Iterator, Mapping
 from concurrent.futures import ThreadPoolExecutor
-from typing import TypeVar, overload
+from typing import Any, TypeVar, overload
 
 import numpy as np
 
@@ -296,13 +296,15 @@ class FormFactorEngine:
             if patch in self._cache or patch in self._spill:
                 yield column_parts(patch, self.raw_column(patch))
 
-    def restore_columns(self, packed: dict[str, np.ndarray]) -> int:
+    def restore_columns(self, packed: Mapping[str, Any]) -> int:
         """Cache the columns :meth:`pass_columns` packed (a resumed pass computes only the
-        others) and return how many; their rays (the earlier run's) are not counted again."""
-        restored = unpack_columns(packed, self._index)
-        for patch, col in restored:
+        others), one at a time (those beyond the cache spilled as they come), and return
+        how many; their rays (the earlier run's) are not counted again."""
+        count = 0
+        for patch, col in unpack_columns(packed, self._index):
             self._store(patch, col)
-        return len(restored)
+            count += 1
+        return count
 
     def raw_columns(self, patches: Iterable[int]) -> Generator[tuple[int, Column], None, None]:
         """(patch, column before balancing) for ``patches`` in order, the missing ones

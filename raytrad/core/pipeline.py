@@ -14,7 +14,7 @@ from __future__ import annotations
 import dataclasses
 import logging
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Mapping
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from typing import Any
@@ -124,7 +124,7 @@ def prepare(
     mesh_settings: MeshSettings | None = None,
     cache_mb: float = defaults.cache_mb,
     stop: Callable[[], bool] | None = None,
-    columns: dict[str, np.ndarray] | None = None,
+    columns: Mapping[str, Any] | None = None,
     on_column: Callable[[RadiosityMesh, FormFactorEngine], None] | None = None,
 ) -> Prepared:
     """Repair, mesh and balance ``scene``: everything before the first shot.
@@ -144,7 +144,8 @@ def prepare(
         (see :meth:`FormFactorEngine.balance`).
     columns : dict or None
         Columns of an earlier pass cut short (:meth:`FormFactorEngine.pass_columns`, from
-        a checkpoint): only the others are computed.
+        a checkpoint, its large arrays possibly left on disk: restored a column at a
+        time): only the others are computed.
     on_column : callable or None
         ``on_column(mesh, engine)`` after each column the pass computes, in the calling
         thread (to checkpoint a long pass).

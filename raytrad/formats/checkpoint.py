@@ -12,9 +12,11 @@ from __future__ import annotations
 import json
 import os
 import shutil
+import struct
 import tempfile
 import zipfile
-from collections.abc import Iterator, Mapping
+import zlib
+from collections.abc import Collection, Iterator, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -115,20 +117,141 @@ def write_checkpoint(
                     np.lib.format.write_array(member, np.asanyarray(values), allow_pickle=False)
 
 
-def read_checkpoint(path: str | os.PathLike[str]) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
+def read_checkpoint(
+    path: str | os.PathLike[str], lazy: Collection[str] = ()
+) -> tuple[dict[str, np.ndarray | StoredArray], dict[str, Any]]:
     """Read a file written by :func:`write_checkpoint`: its arrays and its record.
+
+    Parameters
+    ----------
+    path : path-like
+    lazy : collection of str
+        Names of 1-D arrays to leave on disk: each comes back as a :class:`StoredArray`,
+        read a slice at a time (a form-factor pass's columns: gigabytes at a million
+        receivers, which a resume hands on a column at a time), after its checksum has
+        been checked by reading it through once. A member that cannot be read in place
+        (compressed, or not 1-D) is read whole.
 
     Raises
     ------
     RaytradError
-        Naming the file: unreadable, not an archive, or without a record.
+        Naming the file: unreadable, not an archive, without a record, or damaged.
     """
     try:
         with np.load(Path(path), allow_pickle=False) as data:
             record = json.loads(str(data[RECORD]))
-            arrays = {name: np.array(data[name]) for name in data.files if name != RECORD}
+            stored = _stored_arrays(Path(path), set(lazy) & set(data.files))
+            arrays: dict[str, np.ndarray | StoredArray] = {
+                name: stored[name] if name in stored else np.array(data[name])
+                for name in data.files
+                if name != RECORD
+            }
     except (OSError, EOFError, KeyError, ValueError, zipfile.BadZipFile) as exc:
         raise RaytradError(f"{path}: cannot read checkpoint ({exc or type(exc).__name__})") from exc
     if not isinstance(record, dict):
         raise RaytradError(f"{path}: cannot read checkpoint (its record is not a table)")
     return arrays, record
+
+
+@dataclass(frozen=True)
+class StoredArray:
+    """A 1-D array left in a checkpoint file (:func:`read_checkpoint`'s ``lazy``): sliced,
+    it reads just that slice, as a new ndarray.
+
+    Attributes
+    ----------
+    path : Path
+        The checkpoint.
+    offset : int
+        Byte offset of the array's first value in the file.
+    dtype : numpy.dtype
+    length : int
+    """
+
+    path: Path
+    offset: int
+    dtype: np.dtype
+    length: int
+
+    ndim = 1
+
+    def __len__(self) -> int:
+        return self.length
+
+    @property
+    def shape(self) -> tuple[int]:
+        return (self.length,)
+
+    def __array__(self, dtype: Any = None, copy: bool | None = None) -> np.ndarray:
+        """The whole array, read (``np.asarray`` of a stored array)."""
+        values = self[:]
+        return values if dtype is None else values.astype(dtype)
+
+    def __getitem__(self, index: slice) -> np.ndarray:
+        start, stop, step = index.indices(self.length)
+        if step != 1:
+            raise IndexError("a stored array is read in plain slices")
+        count = max(stop - start, 0)
+        with open(self.path, "rb") as handle:
+            handle.seek(self.offset + start * self.dtype.itemsize)
+            values = np.fromfile(handle, dtype=self.dtype, count=count)
+        if len(values) != count:
+            raise RaytradError(f"{self.path}: cannot read checkpoint (it was cut short)")
+        return values
+
+
+#: Bytes of a zip member's local header before its name and extra field.
+_LOCAL_HEADER = 30
+
+
+def _stored_arrays(path: Path, names: set[str]) -> dict[str, StoredArray]:
+    """The ``names`` (of ``.npy`` members) that can be read in place, as
+    :class:`StoredArray`; each member's CRC checked by reading it through in blocks.
+
+    Raises
+    ------
+    ValueError
+        A member's checksum or headers do not hold.
+    """
+    out = {}
+    with zipfile.ZipFile(path) as archive, open(path, "rb") as handle:
+        for name in sorted(names):
+            info = archive.getinfo(name + ".npy")
+            if info.compress_type != zipfile.ZIP_STORED:
+                continue
+            handle.seek(info.header_offset)
+            local = handle.read(_LOCAL_HEADER)
+            if local[:4] != b"PK\x03\x04":
+                raise ValueError(f"member {name} has no local header")
+            name_length, extra_length = struct.unpack("<HH", local[26:30])
+            start = info.header_offset + _LOCAL_HEADER + name_length + extra_length
+            handle.seek(start)
+            version = np.lib.format.read_magic(handle)
+            if version == (1, 0):
+                shape, fortran, dtype = np.lib.format.read_array_header_1_0(handle)
+            elif version == (2, 0):
+                shape, fortran, dtype = np.lib.format.read_array_header_2_0(handle)
+            else:
+                continue
+            if len(shape) != 1 or fortran or dtype.hasobject:
+                continue
+            offset = handle.tell()
+            if offset - start + shape[0] * dtype.itemsize != info.file_size:
+                raise ValueError(f"member {name} is not the size its header says")
+            if _crc(handle, start, info.file_size) != info.CRC:
+                raise ValueError(f"member {name} is damaged (its checksum differs)")
+            out[name] = StoredArray(path, offset, dtype, int(shape[0]))
+    return out
+
+
+def _crc(handle: Any, start: int, size: int, block: int = 1 << 24) -> int:
+    """CRC-32 of ``size`` bytes of ``handle`` from ``start``, read in blocks."""
+    handle.seek(start)
+    crc = 0
+    while size > 0:
+        data = handle.read(min(block, size))
+        if not data:
+            raise ValueError("the file ends early")
+        crc = zlib.crc32(data, crc)
+        size -= len(data)
+    return crc

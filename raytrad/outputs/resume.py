@@ -80,7 +80,7 @@ def save_state(
 
 def resume_point(
     path: Path, key: dict[str, Any], strict: bool = True
-) -> tuple[SolverState | None, dict[str, np.ndarray] | None, ErrorLog | None]:
+) -> tuple[SolverState | None, dict[str, Any] | None, ErrorLog | None]:
     """What ``--resume`` continues from: the saved solver state, the columns of a
     form-factor pass cut short and the error log of the solve so far ((None, None, None)
     without a checkpoint; the log None when the checkpoint has none, or an unreadable one).
@@ -104,7 +104,7 @@ def resume_point(
         say("%s: no checkpoint to resume from; starting afresh", path)
         return None, None, None
     try:
-        arrays, record = read_checkpoint(path)  # once: with a whole pass, hundreds of MB
+        arrays, record = read_checkpoint(path, lazy=_LAZY)  # the columns stay on disk
         state = _saved_state(path, arrays, record, key)
         columns, whole = _pass_columns(path, arrays, record)
     except RaytradError as exc:
@@ -130,15 +130,18 @@ def _history(path: str | os.PathLike[str], record: dict[str, Any]) -> ErrorLog |
         return None
 
 
-def load_pass_columns(path: str | os.PathLike[str]) -> dict[str, np.ndarray]:
+def load_pass_columns(path: str | os.PathLike[str]) -> dict[str, Any]:
     """The form-factor columns :func:`save_state` stored in ``path`` ({} if none: the pass
-    was complete). Read after :func:`load_state` has checked the fingerprint."""
-    return _pass_columns(path, *read_checkpoint(path))[0]
+    was complete), the large arrays left on disk
+    (:class:`~raytrad.formats.checkpoint.StoredArray`, read a column at a time by
+    :meth:`~raytrad.core.formfactor.FormFactorEngine.restore_columns`). Read after
+    :func:`load_state` has checked the fingerprint."""
+    return _pass_columns(path, *read_checkpoint(path, lazy=_LAZY))[0]
 
 
 def _pass_columns(
-    path: str | os.PathLike[str], arrays: dict[str, np.ndarray], record: dict[str, Any]
-) -> tuple[dict[str, np.ndarray], bool]:
+    path: str | os.PathLike[str], arrays: dict[str, Any], record: dict[str, Any]
+) -> tuple[dict[str, Any], bool]:
     """:func:`load_pass_columns` from a checkpoint's ``arrays`` and ``record``, and
     whether they are a whole pass (``whole_pass``)."""
     columns = {name[len(PASS) :]: a for name, a in arrays.items() if name.startswith(PASS)}
@@ -159,7 +162,13 @@ _PARTS = {
 }
 
 
-def _consistent(columns: dict[str, np.ndarray]) -> bool:
+#: The packed column arrays a resume reads a column at a time
+#: (:class:`~raytrad.formats.checkpoint.StoredArray`): a whole pass at a million
+#: receivers is gigabytes, more than the run's memory bound.
+_LAZY = frozenset(PASS + name for name in _PARTS)
+
+
+def _consistent(columns: dict[str, Any]) -> bool:
     """Every packed array is there, partitioned exactly by its lengths, one per patch."""
     names = {"patch", *_PARTS, *_PARTS.values()}
     if not names <= set(columns) or any(columns[n].ndim != 1 for n in names):
@@ -184,7 +193,7 @@ def load_state(path: str | os.PathLike[str], key: dict[str, Any]) -> SolverState
 
 def _saved_state(
     path: str | os.PathLike[str],
-    arrays: dict[str, np.ndarray],
+    arrays: dict[str, Any],
     record: dict[str, Any],
     key: dict[str, Any],
 ) -> SolverState:
@@ -241,7 +250,7 @@ def checkpoint_path(output_dir: Path, stem: str) -> Path:
 
 
 def resume_facts(
-    state: SolverState | None, columns: dict[str, np.ndarray] | None
+    state: SolverState | None, columns: dict[str, Any] | None
 ) -> dict[str, Any] | None:
     """What a run took from its checkpoint, for ``report.json``'s ``"resumed"``: the
     solve's shots and seconds (0 where the pass was cut short: the solve then starts

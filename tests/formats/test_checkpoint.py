@@ -1,14 +1,23 @@
-"""The checkpoint file: named arrays and a JSON record back bit for bit, atomically."""
+"""The checkpoint file: named arrays and a JSON record back bit for bit, atomically; large
+arrays left on disk and read a slice at a time, their checksums checked."""
 
 from __future__ import annotations
 
+import json
+import zipfile
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 from raytrad.errors import RaytradError
-from raytrad.formats.checkpoint import RECORD, Spool, read_checkpoint, write_checkpoint
+from raytrad.formats.checkpoint import (
+    RECORD,
+    Spool,
+    StoredArray,
+    read_checkpoint,
+    write_checkpoint,
+)
 
 
 def test_round_trip(tmp_path: Path) -> None:
@@ -68,3 +77,71 @@ def test_unreadable_files_are_one_error_naming_the_file(
     with pytest.raises(RaytradError, match="cannot read checkpoint") as caught:
         read_checkpoint(path)
     assert str(path) in str(caught.value)
+
+
+def _written(path: Path) -> dict[str, np.ndarray]:
+    """A checkpoint of plain arrays (``.npy`` 1.0 headers) and spooled ones (2.0)."""
+    rng = np.random.default_rng(2)
+    plain = {"f": rng.random(1000), "small": np.arange(3, dtype=np.int32), "m": np.eye(3)}
+    spooled = rng.integers(0, 1 << 40, 5000)
+    with Spool() as spool:
+        spool.add({"s": spooled[:1234]})
+        spool.add({"s": spooled[1234:]})
+        write_checkpoint(path, {**plain, **spool.arrays()}, {"k": 1})
+    return {**plain, "s": spooled}
+
+
+def test_lazy_arrays_stay_on_disk_and_read_in_slices(tmp_path: Path) -> None:
+    path = tmp_path / "c.npz"
+    arrays = _written(path)
+    back, record = read_checkpoint(path, lazy={"f", "s", "m", "absent"})
+    assert record == {"k": 1} and set(back) == set(arrays)
+    assert isinstance(back["f"], StoredArray) and isinstance(back["s"], StoredArray)
+    assert isinstance(back["m"], np.ndarray)  # not 1-D: read whole
+    assert isinstance(back["small"], np.ndarray)  # not asked for
+    for name in ("f", "s"):
+        stored, want = back[name], arrays[name]
+        assert len(stored) == len(want) and stored.shape == want.shape
+        assert stored.dtype == want.dtype and stored.ndim == 1
+        for a, b in ((0, 10), (1233, 1235), (len(want) - 3, len(want)), (7, 7), (0, None)):
+            got = stored[a:b]
+            assert isinstance(got, np.ndarray) and got.dtype == want.dtype
+            np.testing.assert_array_equal(got, want[a:b])
+        np.testing.assert_array_equal(np.asarray(stored), want)
+    np.testing.assert_array_equal(back["m"], arrays["m"])
+
+
+def test_a_damaged_lazy_array_is_refused_by_its_checksum(tmp_path: Path) -> None:
+    """One flipped byte in a lazily read member's data: numpy's own reader would catch it
+    by the zip's CRC when it reads the member; reading in place checks the CRC first."""
+    path = tmp_path / "c.npz"
+    _written(path)
+    with zipfile.ZipFile(path) as archive:
+        info = archive.getinfo("s.npy")
+    data = bytearray(path.read_bytes())
+    data[info.header_offset + 200] ^= 0xFF  # past the local and .npy headers
+    path.write_bytes(bytes(data))
+    with pytest.raises(RaytradError, match="cannot read checkpoint") as caught:
+        read_checkpoint(path, lazy={"s"})
+    assert str(path) in str(caught.value) and "checksum" in str(caught.value)
+    with pytest.raises(RaytradError, match="cannot read checkpoint"):
+        read_checkpoint(path)  # read whole: the same damage found by numpy
+
+
+def test_a_compressed_member_is_read_whole(tmp_path: Path) -> None:
+    """An archive not written by raytrad (compressed members) still reads: a member that
+    cannot be read in place comes back whole."""
+    path = tmp_path / "c.npz"
+    values = np.arange(100.0)
+    np.savez_compressed(path, a=values, **{RECORD: np.array(json.dumps({"k": 2}))})
+    back, record = read_checkpoint(path, lazy={"a"})
+    assert record == {"k": 2} and isinstance(back["a"], np.ndarray)
+    np.testing.assert_array_equal(back["a"], values)
+
+
+def test_a_checkpoint_cut_short_is_refused(tmp_path: Path) -> None:
+    path = tmp_path / "c.npz"
+    _written(path)
+    path.write_bytes(path.read_bytes()[:-4000])
+    with pytest.raises(RaytradError, match="cannot read checkpoint"):
+        read_checkpoint(path, lazy={"s", "f"})
