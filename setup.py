@@ -21,6 +21,9 @@ from pathlib import Path
 from setuptools import setup
 from setuptools.command.build_py import build_py
 
+#: The most seconds a compiling process may take (about 8 s in all on 2 cores).
+TIMEOUT = 600
+
 
 class build_py_with_kernels(build_py):  # setuptools names commands in snake case
     def run(self) -> None:
@@ -64,7 +67,12 @@ def compile_kernels(build_lib: Path) -> None:
         subprocess.Popen([sys.executable, "-c", program, str(build_lib), *line.split()], env=env)
         for line in listed.stdout.splitlines()
     ]
-    failed = [h.args for h in helpers if h.wait() != 0]
+    try:
+        failed = [h.args for h in helpers if h.wait(timeout=TIMEOUT) != 0]
+    finally:  # past the timeout (or interrupted): none left running
+        for helper in helpers:
+            helper.kill()
+            helper.wait()
     if failed:
         raise RuntimeError(f"{len(failed)} compiling processes failed")
     seconds = time.perf_counter() - start
