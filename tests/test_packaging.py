@@ -15,9 +15,6 @@ import pytest
 from raytrad.core._kernel_signatures import SIGNATURES
 from tests.conftest import REPOSITORY
 
-#: What the build leaves out of its copy of the checkout.
-UNBUILT = ("build", "dist", ".git", "__pycache__", "*.egg-info", ".venv", ".cache", "out*")
-
 #: Lists the listed kernels numba's cache, as the installed package finds it, lacks.
 MISSING = (
     "import json, sys; sys.path.insert(0, sys.argv[1]); import numba; "
@@ -35,8 +32,11 @@ def test_the_wheel_carries_every_listed_kernel_compiled(tmp_path: Path) -> None:
     numba's cache of every kernel a render calls, and numba, reading the unpacked wheel
     as an installed package, finds each listed signature there (its source hash, this
     CPU and numba version match): nothing left to compile."""
-    source = tmp_path / "source"  # a clean tree: no build folder of an earlier build
-    shutil.copytree(REPOSITORY, source, ignore=shutil.ignore_patterns(*UNBUILT))
+    source = tmp_path / "source"  # what a build reads, no earlier build's folder or cache
+    package = shutil.ignore_patterns("__pycache__")
+    shutil.copytree(REPOSITORY / "raytrad", source / "raytrad", ignore=package)
+    for name in ("pyproject.toml", "setup.py", "README.md"):
+        shutil.copy(REPOSITORY / name, source / name)
     wheels = tmp_path / "wheels"
     build = subprocess.run(
         [
