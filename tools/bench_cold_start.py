@@ -16,6 +16,7 @@ import argparse
 import json
 import os
 import shutil
+import statistics
 import subprocess
 import sys
 import tempfile
@@ -50,7 +51,7 @@ def one_try(source: Path, build_kernels: bool, receivers: int, work: Path) -> di
             shutil.copytree(
                 source / name, tree / name, ignore=shutil.ignore_patterns("__pycache__")
             )
-        else:
+        elif (source / name).exists():  # an older tree may lack setup.py
             shutil.copy(source / name, tree / name)
     env = {k: v for k, v in os.environ.items() if k not in ("NUMBA_CACHE_DIR", "PYTHONPATH")}
     env["RAYTRAD_BUILD_KERNELS"] = "1" if build_kernels else "0"
@@ -101,8 +102,8 @@ def main() -> None:
     print("|---" * (len(steps) + 2) + "|")
     totals = {}
     for name, tries in results.items():
-        median = {s: sorted(t[s] for t in tries)[len(tries) // 2] for s in steps}
-        totals[name] = sorted(t["install"] + t["first render"] for t in tries)[len(tries) // 2]
+        median = {s: statistics.median(t[s] for t in tries) for s in steps}
+        totals[name] = statistics.median(t["install"] + t["first render"] for t in tries)
         cells = " | ".join(f"{median[s]:.2f}" for s in steps)
         print(f"| {name} | {cells} | {totals[name]:.1f} |")
     first, *others = totals
