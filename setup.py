@@ -21,7 +21,7 @@ from pathlib import Path
 from setuptools import setup
 from setuptools.command.build_py import build_py
 
-#: The most seconds a compiling process may take (about 8 s in all on 2 cores).
+#: The most seconds the compiling may take (about 8 s on 2 cores).
 TIMEOUT = 600
 
 
@@ -41,42 +41,19 @@ class build_py_with_kernels(build_py):  # setuptools names commands in snake cas
 
 def compile_kernels(build_lib: Path) -> None:
     """Compile every listed kernel of the built package in ``build_lib`` into its
-    in-tree numba cache, shared out over the cores as a first render would."""
+    in-tree numba cache (:func:`raytrad.core.compiled.compile_listed`, in a process of
+    the build's Python importing the built package)."""
     start = time.perf_counter()
-    cache = build_lib / "raytrad" / "core" / "__pycache__"
     env = {k: v for k, v in os.environ.items() if k != "NUMBA_CACHE_DIR"}  # in-tree cache
-    lister = (
-        "import sys; sys.path.insert(0, sys.argv[1]); "
-        "from raytrad.core import compiled; "
-        "from raytrad.core._kernel_signatures import SECONDS, SIGNATURES; "
-        "groups = compiled.share_out(list(SIGNATURES), compiled.compilers(), SECONDS); "
-        "print('\\n'.join(' '.join(g) for g in groups if g))"
-    )
-    listed = subprocess.run(
-        [sys.executable, "-c", lister, str(build_lib)],
-        env=env,
-        capture_output=True,
-        text=True,
-        check=True,
-    )
     program = (
         "import sys; sys.path.insert(0, sys.argv[1]); "
-        "from raytrad.core.compiled import _compile_named; sys.exit(_compile_named(sys.argv[2:]))"
+        "from raytrad.core.compiled import compile_listed; compile_listed()"
     )
-    helpers = [
-        subprocess.Popen([sys.executable, "-c", program, str(build_lib), *line.split()], env=env)
-        for line in listed.stdout.splitlines()
-    ]
-    try:
-        failed = [h.args for h in helpers if h.wait(timeout=TIMEOUT) != 0]
-    finally:  # past the timeout (or interrupted): none left running
-        for helper in helpers:
-            helper.kill()
-            helper.wait()
-    if failed:
-        raise RuntimeError(f"{len(failed)} compiling processes failed")
+    subprocess.run(
+        [sys.executable, "-c", program, str(build_lib)], env=env, check=True, timeout=TIMEOUT
+    )
     seconds = time.perf_counter() - start
-    count = len(list(cache.glob("*.nbi")))
+    count = len(list((build_lib / "raytrad" / "core" / "__pycache__").glob("*.nbi")))
     print(f"raytrad: {count} compiled functions cached for this machine in {seconds:.1f} s")
 
 

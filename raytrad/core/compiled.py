@@ -267,6 +267,23 @@ def _compile_named(names: list[str]) -> int:
     return 0
 
 
+def compile_listed() -> None:
+    """Compile every kernel a render calls (:data:`~raytrad.core._kernel_signatures.SIGNATURES`)
+    into numba's cache now: on every core, as a first render would
+    (:func:`_compile_ahead`), then in this process whatever is still not cached (one core,
+    or a helper that failed). ``setup.py``'s build hook runs it on the package being
+    built, so that the installed package carries the cache."""
+    import numba
+
+    from raytrad.core._kernel_signatures import SIGNATURES
+
+    kernels = _dispatchers(numba)
+    _compile_ahead(numba, kernels)
+    for name, signatures in SIGNATURES.items():
+        if not _cached(numba, kernels[name], signatures):
+            _compile(numba, kernels[name], signatures)
+
+
 def _jit(numba: Any, function: Any, borrowing: bool = False) -> Any:
     """``numba.njit(cache=True, nogil=True)``, without the disk cache where numba finds no
     writable place for it (a read-only install and no home directory): compiled anew in
