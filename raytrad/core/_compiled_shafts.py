@@ -23,6 +23,7 @@ KERNELS = (
     "_sheet_hides",
     "_solid_hides",
     "_group_candidates",
+    "_origin_hider",
     "blocked_pairs",
 )
 
@@ -102,6 +103,67 @@ def _solid_hides(h_o, h_v, kind, lo, hi, margin, lift, gap):
     return (1.0 - latest) * gap >= 2.0 * lift
 
 
+def _origin_hider(
+    o,
+    found,
+    candidates,
+    recent,
+    patch_center,
+    reach,
+    normal,
+    offset,
+    kind,
+    plane_ptr,
+    center,
+    radius,
+    margin,
+    lift,
+    h_o,
+    h_v,
+):
+    """The blocker that hides every corner from origin ``o`` (heights ``h_v``), of the
+    group's ``found`` candidates, ``recent`` (the one that hid the last origin) tried
+    first; -1 when none does. ``h_o`` is scratch for the origin's plane heights."""
+    dx = patch_center[0] - o[0]
+    dy = patch_center[1] - o[1]
+    dz = patch_center[2] - o[2]
+    length2 = dx * dx + dy * dy + dz * dz
+    # the capsule test only chooses which blockers get the exact test, so its
+    # rounding (a product by the inverse, squares; 0.80 of the division's and
+    # root's time) may differ from the reference's: a blocker passed over leaves
+    # the pair traced, to the same factor
+    inverse = 1.0 / length2 if length2 > 0.0 else 0.0
+    gap = math.sqrt(length2) - reach
+    for step in range(-1, found):
+        if step < 0:
+            b = recent
+            if b < 0:
+                continue
+        else:
+            b = candidates[step]
+            if b == recent:
+                continue
+        cx, cy, cz = center[b, 0] - o[0], center[b, 1] - o[1], center[b, 2] - o[2]
+        t = min(max((cx * dx + cy * dy + cz * dz) * inverse, 0.0), 1.0)
+        ex, ey, ez = cx - t * dx, cy - t * dy, cz - t * dz
+        if ex * ex + ey * ey + ez * ez > (radius[b] + reach) ** 2:
+            continue
+        lo, hi = plane_ptr[b], plane_ptr[b + 1]
+        for k in range(lo, hi):
+            h_o[k] = o[0] * normal[k, 0] + o[1] * normal[k, 1] + o[2] * normal[k, 2] - offset[k]
+        sheet = False
+        for k in range(lo, hi):
+            if kind[k] == SHEET:
+                sheet = True
+        if sheet:
+            hides = _sheet_hides(h_o, h_v, kind, lo, hi, margin)
+        else:
+            hides = _solid_hides(h_o, h_v, kind, lo, hi, margin, lift, gap)
+        if hides:
+            return b
+    return np.int64(-1)
+
+
 def blocked_pairs(
     origins,
     corners,
@@ -115,15 +177,18 @@ def blocked_pairs(
     radius,
     margin,
     lift,
+    probe,
 ):
     """(N,) bool: origins from which one blocker hides every corner (see
-    :func:`raytrad.core.blockers.numpy_blocked`).
+    :func:`raytrad.core.blockers.numpy_blocked`, ``probe`` as there).
 
     The origins go in groups of :data:`BLOCKER_GROUP` consecutive ones (the pass's
     receivers are in Morton order, so a group lies in one part of the scene): a blocker
     whose sphere does not come within its radius + ``reach`` + the group's radius of the
     segment from the group's centre to the patch's misses every origin's capsule, and only
-    the others are tried per origin, the one that hid the last origin first."""
+    the others are tried per origin, the one that hid the last origin first. With
+    ``probe``, a group's first and last origins are tested first, and the others only
+    when one of those two is hidden."""
     out = np.zeros(len(origins), dtype=np.bool_)
     h_v = _heights(corners, normal, offset)
     h_o = np.empty(len(offset))
@@ -135,49 +200,57 @@ def blocked_pairs(
         found = _group_candidates(
             origins, first, last, patch_center, reach, center, radius, candidates
         )
-        for i in range(first, last):
-            o = origins[i]
-            dx = patch_center[0] - o[0]
-            dy = patch_center[1] - o[1]
-            dz = patch_center[2] - o[2]
-            length2 = dx * dx + dy * dy + dz * dz
-            # the capsule test only chooses which blockers get the exact test, so its
-            # rounding (a product by the inverse, squares; 0.80 of the division's and
-            # root's time) may differ from the reference's: a blocker passed over leaves
-            # the pair traced, to the same factor
-            inverse = 1.0 / length2 if length2 > 0.0 else 0.0
-            gap = math.sqrt(length2) - reach
-            for step in range(-1, found):
-                if step < 0:
-                    b = recent
-                    if b < 0:
-                        continue
-                else:
-                    b = candidates[step]
-                    if b == recent:
-                        continue
-                cx, cy, cz = center[b, 0] - o[0], center[b, 1] - o[1], center[b, 2] - o[2]
-                t = min(max((cx * dx + cy * dy + cz * dz) * inverse, 0.0), 1.0)
-                ex, ey, ez = cx - t * dx, cy - t * dy, cz - t * dz
-                if ex * ex + ey * ey + ez * ez > (radius[b] + reach) ** 2:
-                    continue
-                lo, hi = plane_ptr[b], plane_ptr[b + 1]
-                for k in range(lo, hi):
-                    h_o[k] = (
-                        o[0] * normal[k, 0] + o[1] * normal[k, 1] + o[2] * normal[k, 2] - offset[k]
-                    )
-                sheet = False
-                for k in range(lo, hi):
-                    if kind[k] == SHEET:
-                        sheet = True
-                if sheet:
-                    hides = _sheet_hides(h_o, h_v, kind, lo, hi, margin)
-                else:
-                    hides = _solid_hides(h_o, h_v, kind, lo, hi, margin, lift, gap)
-                if hides:
+        if found == 0:
+            continue
+        lo, hi = first, last
+        if probe and last - first > 2:
+            for i in (first, last - 1):
+                b = _origin_hider(
+                    origins[i],
+                    found,
+                    candidates,
+                    recent,
+                    patch_center,
+                    reach,
+                    normal,
+                    offset,
+                    kind,
+                    plane_ptr,
+                    center,
+                    radius,
+                    margin,
+                    lift,
+                    h_o,
+                    h_v,
+                )
+                if b >= 0:
                     out[i] = True
                     recent = b
-                    break
+            if not (out[first] or out[last - 1]):
+                continue
+            lo, hi = first + 1, last - 1
+        for i in range(lo, hi):
+            b = _origin_hider(
+                origins[i],
+                found,
+                candidates,
+                recent,
+                patch_center,
+                reach,
+                normal,
+                offset,
+                kind,
+                plane_ptr,
+                center,
+                radius,
+                margin,
+                lift,
+                h_o,
+                h_v,
+            )
+            if b >= 0:
+                out[i] = True
+                recent = b
     return out
 
 

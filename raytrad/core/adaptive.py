@@ -418,7 +418,7 @@ def final_gather(
     (:meth:`~raytrad.core.formfactor.FormFactorEngine.gather_at`); a point that sees
     surfaces all round (probe rays) has its factors summed to 1 as balancing does; a
     point shut in (under a block) keeps its emission, and so does a point of zero
-    reflectance, for which no factor is computed and no ray cast.
+    reflectance: neither gets a factor or a ray.
 
     Parameters
     ----------
@@ -455,8 +455,9 @@ def final_gather(
         closed, hidden = occluder.probe_hemispheres(
             points, normals, scene_normals, scene.double_sided
         )
-    # a point on a black surface shows its emission whatever reaches it: no rows, no rays
-    lit = np.flatnonzero(np.asarray(reflectance).any(axis=1))
+    # a point on a black surface, or shut in, shows its emission whatever reaches it: no
+    # rows, no rays
+    lit = np.flatnonzero(np.asarray(reflectance).any(axis=1) & ~hidden)
     rows = engine.gather_rows(points[lit], normals[lit], stop)
     if rows is None:
         return None, hidden

@@ -75,6 +75,12 @@ MAX_TRIANGLES = 200_000
 #: tests each plane, and a tessellated ball (1 280 planes) cost more than its rays
 #: (2026-12-03: a box with such a ball took 1.92 times the pass without blockers).
 MAX_PLANES = 64
+#: Origins per group of the blocker test (:meth:`Blockers.blocked`): a group shares one
+#: list of candidate blockers and, probed, is tested whole only when an end is hidden.
+#: Probing in the pass (2026-12-05): in a cluttered room 14 % of the origins tested are
+#: hidden, two thirds of the groups have none, and probing leaves 0.30 of the tests for
+#: 0.82 of the hidden pairs; in the Cornell box (49 % hidden) 0.65 of the tests for 0.98.
+PROBE_GROUP = 16
 
 
 @dataclass(frozen=True)
@@ -114,7 +120,12 @@ class Blockers:
         return len(self.radius)
 
     def blocked(
-        self, origins: np.ndarray, corners: np.ndarray, patch_center: np.ndarray, reach: float
+        self,
+        origins: np.ndarray,
+        corners: np.ndarray,
+        patch_center: np.ndarray,
+        reach: float,
+        probe: bool = False,
     ) -> np.ndarray:
         """(N,) bool: the ray origins from which one blocker hides every ray target of a
         patch.
@@ -128,8 +139,13 @@ class Blockers:
             (:func:`target_corners`) [m].
         patch_center : (3,) float64, reach : float
             A ball holding those corners [m].
+        probe : bool
+            Test each group of :data:`PROBE_GROUP` consecutive origins (nearby ones, in
+            Morton order) only when its first or last origin is hidden: the others of a
+            group whose two ends are seen are called not hidden untested (False where the
+            full test may say True; a pair called so is traced, to the same factor).
         """
-        args = (origins, corners, patch_center, reach, self)
+        args = (origins, corners, patch_center, reach, self, probe)
         fast = compiled.get()
         if fast is None or len(origins) == 0:
             return numpy_blocked(*args)
@@ -147,6 +163,7 @@ class Blockers:
                 self.radius,
                 self.margin,
                 self.lift,
+                bool(probe),
             ),
             dtype=bool,
         )
@@ -158,6 +175,7 @@ def numpy_blocked(
     patch_center: np.ndarray,
     reach: float,
     blockers: Blockers,
+    probe: bool = False,
 ) -> np.ndarray:
     """The numpy reference of :meth:`Blockers.blocked` (same arguments, same result)."""
     o = np.asarray(origins, dtype=np.float64).reshape(-1, 3)
@@ -203,6 +221,19 @@ def numpy_blocked(
             ok &= ((enter <= leave) & ~parallel_out).all(axis=1)
             ok &= (1.0 - enter.max(axis=1, initial=0.0)) * gap[todo] >= 2.0 * lift
         out[np.flatnonzero(todo)[ok]] = True
+    return probed(out) if probe else out
+
+
+def probed(hidden: np.ndarray) -> np.ndarray:
+    """(N,) bool: ``hidden`` with every group of :data:`PROBE_GROUP` consecutive origins
+    (more than two) whose first and last are not hidden cleared: what
+    :meth:`Blockers.blocked` finds with ``probe``."""
+    out = np.array(hidden, dtype=bool)
+    first = np.arange(0, len(out), PROBE_GROUP)
+    last = np.minimum(first + PROBE_GROUP, len(out)) - 1
+    skipped = ~(out[first] | out[last]) & (last - first > 1)
+    for a, b in zip(first[skipped], last[skipped], strict=True):
+        out[a : b + 1] = False
     return out
 
 

@@ -227,6 +227,7 @@ class PairFactors:
                 self._corners[self._corner_ptr[patch] : self._corner_ptr[patch + 1]],
                 m.patch_center[patch],
                 float(self._corner_reach[patch]),
+                probe=True,
             )
             unoccluded = np.where(hidden, 0.0, unoccluded)
             sees &= ~hidden

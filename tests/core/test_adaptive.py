@@ -9,6 +9,7 @@ from collections.abc import Callable
 import numpy as np
 import pytest
 
+from raytrad.constants import tol
 from raytrad.core.adaptive import (
     FOUND_SHARE,
     Refinement,
@@ -142,6 +143,46 @@ def test_black_points_show_their_emission_without_rays(
     np.testing.assert_array_equal(every[black], emitted[black])
     np.testing.assert_array_equal(every[~black], lit)
     assert (lit[mesh.receiver_area[pick][~black] > 0] > 0).all()  # not hidden: lit
+
+
+def test_shut_in_points_show_their_emission_without_rays(
+    cornell_fine: tuple[Prepared, SolveResult],
+) -> None:
+    """A point shut in (the floor under a block, found by its probe rays) keeps its
+    emission: it casts no visibility ray and gets no factor, and the other points gather
+    exactly what they gather without it."""
+    prepared, result = cornell_fine
+    mesh, engine = prepared.mesh, prepared.engine
+    hidden = np.flatnonzero(mesh.receiver_area == 0)
+    seen = np.flatnonzero(mesh.receiver_area > 0)
+    assert len(hidden) >= 20
+    rng = np.random.default_rng(5)
+    pick = np.concatenate([rng.choice(hidden, 20, replace=False), rng.choice(seen, 100)])
+    points, _ = receiver_points(mesh, tol.ray_offset * engine.diagonal)
+    emitted = rng.uniform(0.0, 5.0, (len(pick), 3))
+    means = patch_means(mesh, result.radiosity)
+
+    def gathered(keep: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:
+        before = engine.rays_cast
+        out, shut = final_gather(
+            prepared.scene,
+            engine,
+            prepared.occluder,
+            result.radiosity,
+            means,
+            points[pick][keep],
+            mesh.receiver_normal[pick][keep],
+            mesh.receiver_reflectance[pick][keep],
+            emitted[keep],
+        )
+        return out, shut, engine.rays_cast - before
+
+    every, shut, every_rays = gathered(np.ones(len(pick), dtype=bool))
+    assert shut[:20].all() and not shut[20:].any()
+    open_only, _, open_rays = gathered(~shut)
+    assert every_rays == open_rays > 0
+    np.testing.assert_array_equal(every[shut], emitted[shut])
+    np.testing.assert_array_equal(every[~shut], open_only)
 
 
 def test_a_stop_within_a_round_keeps_the_look_of_the_round_before(

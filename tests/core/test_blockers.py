@@ -98,7 +98,7 @@ def test_non_convex_components_block_nothing() -> None:
 
 
 def classify(
-    found: bl.Blockers, origins: np.ndarray, quad: np.ndarray
+    found: bl.Blockers, origins: np.ndarray, quad: np.ndarray, probe: bool = False
 ) -> tuple[np.ndarray, np.ndarray]:
     """(compiled or numpy, numpy) blocked flags of origins against a quad patch."""
     normal = np.cross(quad[1] - quad[0], quad[3] - quad[0])
@@ -106,8 +106,8 @@ def classify(
     center = quad.mean(axis=0)
     reach = float(np.linalg.norm(corners - center, axis=1).max())
     return (
-        found.blocked(origins, corners, center, reach),
-        bl.numpy_blocked(origins, corners, center, reach, found),
+        found.blocked(origins, corners, center, reach, probe),
+        bl.numpy_blocked(origins, corners, center, reach, found, probe),
     )
 
 
@@ -151,9 +151,11 @@ def random_blockers(rng: np.random.Generator) -> bl.Blockers:
 @pytest.mark.skipif(compiled.get() is None, reason="needs the compiled kernels")
 @pytest.mark.parametrize("seed", range(4))
 @pytest.mark.parametrize("ordered", [False, True])
-def test_compiled_test_matches_numpy(seed: int, ordered: bool) -> None:
+@pytest.mark.parametrize("probe", [False, True])
+def test_compiled_test_matches_numpy(seed: int, ordered: bool, probe: bool) -> None:
     """Scattered origins, and origins in Morton order as the pass hands them: groups of
-    nearby origins, whose shared candidate blockers must leave out none that hides."""
+    nearby origins, whose shared candidate blockers must leave out none that hides;
+    probed, the groups whose ends are seen are left untested."""
     rng = np.random.default_rng(seed)
     found = random_blockers(rng)
     hits = 0
@@ -162,10 +164,32 @@ def test_compiled_test_matches_numpy(seed: int, ordered: bool) -> None:
         origins = rng.uniform(-5, 5, (400, 3)) - [0, 0, 4]
         if ordered:
             origins = origins[morton_order(origins)]
-        fast, reference = classify(found, origins, quad)
+        fast, reference = classify(found, origins, quad, probe)
         np.testing.assert_array_equal(fast, reference)
         hits += int(fast.sum())
     assert hits > 0
+
+
+def test_probing_skips_the_groups_whose_ends_are_seen() -> None:
+    """A group of PROBE_GROUP origins keeps what the full test found when its first or
+    last origin is hidden, and loses it when neither is; a group of two or fewer is never
+    skipped."""
+    assert bl.PROBE_GROUP == 16
+    from raytrad.core._compiled_shafts import BLOCKER_GROUP
+
+    assert BLOCKER_GROUP == bl.PROBE_GROUP  # the kernel's groups are the reference's
+    hidden = np.zeros(16 * 4 + 2, dtype=bool)
+    hidden[3:9] = True  # group 0: ends seen, middle hidden -> skipped
+    hidden[16:20] = True  # group 1: first hidden -> kept
+    hidden[40:48] = True  # group 2: last hidden -> kept
+    hidden[50] = True  # group 3: ends seen -> skipped
+    hidden[65] = True  # group 4: two origins -> tested whole
+    out = bl.probed(hidden)
+    expected = hidden.copy()
+    expected[3:9] = False
+    expected[50] = False
+    np.testing.assert_array_equal(out, expected)
+    assert not (out & ~hidden).any()  # never hides what the full test sees
 
 
 @pytest.mark.skipif(compiled.get() is None, reason="needs the compiled kernels")
@@ -182,13 +206,17 @@ def test_grouped_origins_among_many_blockers_match_numpy() -> None:
     assert found is not None and found.count == 40
     origins = rng.uniform(-4, 4, (3000, 3)) * [1, 1, 0.2]
     origins = origins[morton_order(origins)]
-    hits = 0
+    hits = probed_hits = 0
     for _ in range(6):
         quad = PATCH * 0.3 + rng.uniform(-2, 2, 3) * [1, 1, 0] + [0, 0, 3.5]
         fast, reference = classify(found, origins, quad)
         np.testing.assert_array_equal(fast, reference)
         hits += int(fast.sum())
+        fast, reference = classify(found, origins, quad, probe=True)
+        np.testing.assert_array_equal(fast, reference)
+        probed_hits += int(fast.sum())
     assert 0.05 < hits / (6 * len(origins)) < 0.95  # both kinds occur
+    assert 0.5 * hits < probed_hits < hits  # probing misses a few, at groups' edges
 
 
 @pytest.fixture(scope="module", params=[1, 2])
