@@ -134,10 +134,16 @@ def subarea_spread(
     base,
     rule,
     rule_weight,
+    tri_pair,
+    triangles,
+    tri_weight,
+    tri_share,
 ):
     """Node elements' weights on receivers and means (see
     :func:`raytrad.core.spread.numpy_subarea_spread`; handed elements first, then the
-    near ones, each in element order, its items in the order of their slots). ``tree`` is
+    near ones, each in element order, its items in the order of their slots), then the
+    triangle elements' weights on their corners (``tri_*``, see
+    :func:`raytrad.core.spread.numpy_corner_elements`). ``tree`` is
     :attr:`raytrad.core.clusters.Clusters.arrays`."""
     sub_tri, start, stop, left, right, node_point, node_normal, node_area = tree
     n = len(nodes)
@@ -160,6 +166,7 @@ def subarea_spread(
                 count += 1 if mean_ptr[item + 1] > mean_ptr[item] else 0
             else:
                 count += 3 * (stop[-1 - item] - start[-1 - item])
+    count += 3 * len(triangles)
     out_pair = np.empty(count, dtype=np.int64)
     out_source = np.empty(count, dtype=np.int64)
     out_weight = np.empty(count)
@@ -212,6 +219,20 @@ def subarea_spread(
             scale = sub_weight[a] / node_visible[s] if node_visible[s] > 0.0 else 0.0
             for j in range(first, i):
                 out_weight[j] = scale * out_area[j]
+    for b in range(len(triangles)):  # a hidden corner's share goes to the others
+        t = triangles[b]
+        own0 = tri_share[b, 0] if corner_share[t, 0] > 0.0 else 0.0
+        own1 = tri_share[b, 1] if corner_share[t, 1] > 0.0 else 0.0
+        own2 = tri_share[b, 2] if corner_share[t, 2] > 0.0 else 0.0
+        seen = own0 + own1 + own2
+        if seen > 0.0:
+            own0, own1, own2 = own0 / seen, own1 / seen, own2 / seen
+        else:
+            own0, own1, own2 = corner_share[t, 0], corner_share[t, 1], corner_share[t, 2]
+        w = tri_weight[b]
+        for v, own in ((0, own0), (1, own1), (2, own2)):
+            out_pair[i], out_source[i], out_weight[i] = tri_pair[b], corners[t, v], w * own
+            i += 1
     return out_pair, out_source, out_weight
 
 

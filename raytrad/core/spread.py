@@ -89,16 +89,15 @@ class GatherShares:
         sources : (S,) int64
         weights : (S,) float64, normalised to sum 1 per pair (pairs with no weight: empty)
         """
-        sub_pairs, sub_sources, sub_weights = subarea_spread(
-            sub_pair, nodes, sub_weight, points, normals, self
+        pair, source, weight = subarea_spread(
+            sub_pair,
+            nodes,
+            sub_weight,
+            points,
+            normals,
+            self,
+            (tri_pair, triangles, tri_weight, tri_share),
         )
-        seen = self.corner_share[triangles] > 0
-        own = np.where(seen, tri_share, 0.0)
-        total = own.sum(axis=1, keepdims=True)
-        own = np.divide(own, total, out=self.corner_share[triangles].copy(), where=total > 0)
-        pair = np.concatenate([sub_pairs, np.repeat(tri_pair, 3)])
-        source = np.concatenate([sub_sources, self.corners[triangles].reshape(-1)])
-        weight = np.concatenate([sub_weights, (tri_weight[:, None] * own).reshape(-1)])
         return sum_shares(pair, source, weight, len(points))
 
 
@@ -109,13 +108,24 @@ def subarea_spread(
     points: np.ndarray,
     normals: np.ndarray,
     shares: GatherShares,
+    triangles: tuple[np.ndarray, ...] | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Node elements' weights on receivers and means, compiled when available (see
-    :func:`numpy_subarea_spread`, the reference)."""
+    """Node elements' weights on receivers and means, then those of ``triangles``'
+    elements (``(tri_pair, triangle, tri_weight, tri_share)`` of
+    :func:`numpy_corner_elements`) on their corners; compiled when available, in one
+    loop, else :func:`numpy_subarea_spread` and :func:`numpy_corner_elements`, the
+    references."""
+    if triangles is None:
+        triangles = (_NO_INTS, _NO_INTS, np.zeros(0), np.zeros((0, 3)))
     fast = compiled.get()
     if fast is None:
-        return numpy_subarea_spread(sub_pair, nodes, sub_weight, points, normals, shares)
+        parts = (
+            numpy_subarea_spread(sub_pair, nodes, sub_weight, points, normals, shares),
+            numpy_corner_elements(*triangles, shares),
+        )
+        return tuple(np.concatenate(p) for p in zip(*parts, strict=True))  # type: ignore[return-value]
     tree, means = shares.tree, shares.means
+    tri_pair, triangle, tri_weight, tri_share = triangles
 
     def ints(a: np.ndarray) -> np.ndarray:
         return np.ascontiguousarray(a, dtype=np.int64)
@@ -141,8 +151,51 @@ def subarea_spread(
         int(means.base),
         RULE_POINTS,
         RULE_WEIGHTS,
+        ints(tri_pair),
+        ints(triangle),
+        floats(tri_weight),
+        floats(tri_share),
     )
     return pair, source, weight
+
+
+#: An empty index array (no triangle elements).
+_NO_INTS = np.zeros(0, dtype=np.int64)
+
+
+def numpy_corner_elements(
+    tri_pair: np.ndarray,
+    triangles: np.ndarray,
+    tri_weight: np.ndarray,
+    tri_share: np.ndarray,
+    shares: GatherShares,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Triangle elements' weights on their corners: each corner gets its share of the
+    element's weight, a hidden corner's share going to the visible ones in proportion
+    (all by the corners' own shares when none is seen).
+
+    Parameters
+    ----------
+    tri_pair, triangles, tri_weight : (B,) int64, int64, float64
+        Pair index, triangle and visible weight of each element.
+    tri_share : (B, 3) float64
+        How each element's weight splits over its corners (rows summing to 1).
+    shares : GatherShares
+
+    Returns
+    -------
+    pair, source, weight : (3 B,) int64, int64, float64, element by element, corner by
+        corner
+    """
+    seen = shares.corner_share[triangles] > 0
+    own = np.where(seen, tri_share, 0.0)
+    total = own.sum(axis=1, keepdims=True)
+    own = np.divide(own, total, out=shares.corner_share[triangles].copy(), where=total > 0)
+    return (
+        np.repeat(tri_pair, 3),
+        shares.corners[triangles].reshape(-1),
+        (tri_weight[:, None] * own).reshape(-1),
+    )
 
 
 def numpy_subarea_spread(

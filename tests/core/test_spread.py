@@ -16,6 +16,7 @@ from raytrad.core.spread import (
     MIDPOINT_SIZES,
     GatherShares,
     corner_form_factors,
+    numpy_corner_elements,
     numpy_subarea_spread,
     subarea_spread,
 )
@@ -71,6 +72,40 @@ def test_compiled_subarea_spread_matches_numpy(mesh: RadiosityMesh) -> None:
         handed = np.isin(slow[1] - base, nodes)
         kinds += [handed.sum(), ((slow[1] >= base) & ~handed).sum(), (slow[1] < base).sum()]
     assert kinds.min() > 20, kinds
+
+
+@pytest.mark.skipif(compiled.get() is None, reason="numba is not installed")
+def test_triangle_elements_spread_over_their_seen_corners_as_numpy_does(
+    mesh: RadiosityMesh, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The compiled spread appends the triangle elements' corner weights in the loop that
+    spreads the nodes: the same entries, to the bit, as :func:`numpy_corner_elements`,
+    with hidden corners' shares moved to the seen ones (a triangle with every corner
+    hidden, whose corners' own shares are 0, gives nothing)."""
+    shares = GatherShares(mesh, *subarea_triangles(mesh))
+    rng = np.random.default_rng(3)
+    sub_pair, nodes, weight, points, normals = _elements(mesh, shares, 8)
+    count = 500
+    triangles = rng.integers(0, len(mesh.triangles), count)
+    shares.corner_share = shares.corner_share.copy()
+    shares.corner_share[triangles[:40], rng.integers(0, 3, 40)] = 0.0  # one corner hidden
+    shares.corner_share[triangles[40:45]] = 0.0  # all hidden
+    tri_share = rng.dirichlet(np.ones(3), count)
+    elements = (rng.integers(0, 200, count), triangles, rng.random(count), tri_share)
+    fast = subarea_spread(sub_pair, nodes, weight, points, normals, shares, elements)
+    reference = numpy_corner_elements(*elements, shares)
+    for a, b in zip(fast, reference, strict=True):
+        np.testing.assert_array_equal(a[-3 * count :], b)
+    spread = reference[2].reshape(-1, 3)
+    assert (spread[shares.corner_share[triangles] == 0] == 0).all()  # hidden: nothing
+    seen = (shares.corner_share[triangles] > 0).any(axis=1)
+    assert (~seen).sum() >= 5
+    np.testing.assert_allclose(spread[seen].sum(axis=1), elements[2][seen], rtol=1e-14)
+    monkeypatch.setattr(compiled, "get", lambda: None)
+    slow = subarea_spread(sub_pair, nodes, weight, points, normals, shares, elements)
+    for a, b in zip(slow, reference, strict=True):
+        np.testing.assert_array_equal(a[-3 * count :], b)
+    assert len(slow[0]) - 3 * count > 0  # the nodes' entries come first
 
 
 def test_a_near_receiver_whose_cut_has_no_leaf_spreads_over_clusters(
