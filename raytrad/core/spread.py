@@ -117,15 +117,16 @@ def subarea_spread(
     references."""
     if triangles is None:
         triangles = (_NO_INTS, _NO_INTS, np.zeros(0), np.zeros((0, 3)))
+    tri_pair, triangle, tri_weight, tri_share = triangles
     fast = compiled.get()
     if fast is None:
-        parts = (
-            numpy_subarea_spread(sub_pair, nodes, sub_weight, points, normals, shares),
-            numpy_corner_elements(*triangles, shares),
+        nodes_part = numpy_subarea_spread(sub_pair, nodes, sub_weight, points, normals, shares)
+        corners_part = numpy_corner_elements(tri_pair, triangle, tri_weight, tri_share, shares)
+        pair, source, weight = (
+            np.concatenate([a, b]) for a, b in zip(nodes_part, corners_part, strict=True)
         )
-        return tuple(np.concatenate(p) for p in zip(*parts, strict=True))  # type: ignore[return-value]
+        return pair, source, weight
     tree, means = shares.tree, shares.means
-    tri_pair, triangle, tri_weight, tri_share = triangles
 
     def ints(a: np.ndarray) -> np.ndarray:
         return np.ascontiguousarray(a, dtype=np.int64)
