@@ -190,8 +190,8 @@ def _named_below(error: dict[str, Any]) -> str:
     largest = max(parts, key=worst, default=None)
     if largest == "discretisation" and error.get("dominant") == "algebraic":
         return (
-            "; the discretisation figure includes the unfinished solve's own error, so it "
-            "is named only above twice the algebraic"
+            ", since the discretisation figure includes the unfinished solve's own error "
+            "(it is named only above twice the algebraic)"
         )
     return ""
 
@@ -240,7 +240,7 @@ def _print_summary(report: dict[str, Any], outputs: dict[str, Path]) -> None:
         )
         lines.append(
             f"total      {_fmt(max(_finite(error['total_rms'])))} estimated against the "
-            f"physical answer, {error['dominant']} dominates ({parts}){_named_below(error)}"
+            f"physical answer, {error['dominant']} dominates{_named_below(error)}: {parts}"
         )
     refinement = report.get("refinement") or {}
     cut = "; stopped early by the time limit or an interrupt" if refinement.get("stopped") else ""

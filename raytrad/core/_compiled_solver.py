@@ -13,6 +13,7 @@ import numpy as np
 #: Every function to compile, each after the helpers it calls.
 KERNELS = (
     "patch_spread",
+    "patch_spread_rows",
     "patch_average",
     "shoot",
     "column_sweep",
@@ -58,6 +59,43 @@ def patch_spread(
     return spread, peak
 
 
+def patch_spread_rows(
+    rows,
+    patch_entries,
+    patch_ptr,
+    entry_receiver,
+    entry_weight,
+    radiosity,
+    entry_shot,
+    unshot,
+    spread,
+    peak,
+):
+    """:func:`patch_spread` of the patches ``rows`` alone, into ``spread`` and ``peak``
+    (P, 3) in place: each patch's entries (``patch_entries[patch_ptr[p]:patch_ptr[p + 1]]``,
+    ascending, as :func:`patch_spread` meets them) summed from zero in the same order,
+    so to the same bits."""
+    for i in range(len(rows)):
+        p = rows[i]
+        u0, u1, u2 = unshot[p, 0], unshot[p, 1], unshot[p, 2]
+        s0 = s1 = s2 = m0 = m1 = m2 = 0.0
+        for q in range(patch_ptr[p], patch_ptr[p + 1]):
+            e = patch_entries[q]
+            k = entry_receiver[e]
+            w = entry_weight[e]
+            own0 = radiosity[k, 0] - entry_shot[e, 0]
+            own1 = radiosity[k, 1] - entry_shot[e, 1]
+            own2 = radiosity[k, 2] - entry_shot[e, 2]
+            s0 += w * abs(own0 - u0)
+            s1 += w * abs(own1 - u1)
+            s2 += w * abs(own2 - u2)
+            m0 = max(m0, abs(own0))
+            m1 = max(m1, abs(own1))
+            m2 = max(m2, abs(own2))
+        spread[p, 0], spread[p, 1], spread[p, 2] = s0, s1, s2
+        peak[p, 0], peak[p, 1], peak[p, 2] = m0, m1, m2
+
+
 def patch_average(receivers, values, receiver_ptr, entry_patch, entry_weight, patch_count):
     """``W[:, receivers] @ values`` (see :meth:`raytrad.core.system.DiscreteSystem.average`)."""
     out = np.zeros((patch_count, 3))
@@ -101,6 +139,7 @@ def shoot(
     mean_receivers,
     mean_shares,
     base,
+    touched,
 ):
     """One shot through a cached column, in place (see
     :func:`raytrad.core.solver.numpy_shoot`, the reference, for the steps). Returns the
@@ -109,7 +148,8 @@ def shoot(
     get the means of its receivers' shots at ``scratch[base + s]`` (their CSR ``mean_*``).
     ``radiosity`` (``emission + reflectance * irradiance``) is kept with the irradiance.
     The column's factors are ``raw_factors * (row_scale[receivers] * column_scale)``
-    (balanced; ``raw_factors`` when ``row_scale`` is empty)."""
+    (balanced; ``raw_factors`` when ``row_scale`` is empty). The patches of the column's
+    receivers (whose radiosity changes) are marked in ``touched`` ((P,) bool)."""
     count = len(receivers)
     factors = np.empty(count)
     if len(row_scale):
@@ -253,6 +293,7 @@ def shoot(
                     patch_radiosity[held, 1] = held1
                     patch_radiosity[held, 2] = held2
                 held = p
+                touched[p] = True
                 held0, held1, held2 = (
                     patch_radiosity[p, 0],
                     patch_radiosity[p, 1],

@@ -245,10 +245,12 @@ def refine_adaptively(
         counts = np.bincount(added[added >= 0], minlength=len(scene.object_names))
         out.by_object = {n: int(c) for n, c in zip(scene.object_names, counts, strict=True) if c}
         out.change_rms = _change_rms(changes, out.mesh, out.radiosity)
+        cut = f" and one cut short ({out.interpolated} of them interpolated)"
         log.info(
-            "refinement: %d receivers added in %d rounds (%s)",
+            "refinement: %d receivers added in %d rounds%s (%s)",
             out.added,
             out.rounds,
+            cut if out.interpolated else "",
             ", ".join(f"{n} {c}" for n, c in out.by_object.items()),
         )
     return out

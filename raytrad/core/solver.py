@@ -371,7 +371,9 @@ def solve(
             reason = "converged"
             break
         _shoot(problem, state, engine, patch, amount[patch])
-        state.spread, state.peak = problem.spread(state.radiosity, state.entry_shot, state.unshot)
+        state.spread, state.peak = problem.respread(
+            state.spread, state.peak, state.radiosity, state.entry_shot, state.unshot
+        )
         state.rays = rays_before + engine.rays_cast
         state.seconds = time.perf_counter() - start
         unshot_power = float((area @ np.abs(state.unshot)).sum())
@@ -461,7 +463,9 @@ def _shoot(
         means.receivers,
         means.shares,
         means.base,
+        problem.touched,
     )
+    problem.touched[patch] = True  # its receivers' shots and its own shot changed
     area_p = problem.patch_area[patch]
     state.shot[patch] += amount
     state.absorbed += power - reflected
@@ -524,6 +528,7 @@ def numpy_shoot(
     state.escaped += area_p * amount - caught
     state.captured[patch] = float(a @ f) / area_p
     state.shots += 1
+    problem.touched[:] = True  # the next spread is summed whole
 
 
 def _conserve(
