@@ -202,34 +202,13 @@ def blocked_pairs(
         )
         if found == 0:
             continue
-        lo, hi = first, last
-        if probe and last - first > 2:
-            for i in (first, last - 1):
-                b = _origin_hider(
-                    origins[i],
-                    found,
-                    candidates,
-                    recent,
-                    patch_center,
-                    reach,
-                    normal,
-                    offset,
-                    kind,
-                    plane_ptr,
-                    center,
-                    radius,
-                    margin,
-                    lift,
-                    h_o,
-                    h_v,
-                )
-                if b >= 0:
-                    out[i] = True
-                    recent = b
-            if not (out[first] or out[last - 1]):
-                continue
-            lo, hi = first + 1, last - 1
-        for i in range(lo, hi):
+        probing = probe and last - first > 2
+        for step in range(last - first):
+            i = first + step
+            if probing:  # the ends first, then the others if an end is hidden
+                if step == 2 and not (out[first] or out[last - 1]):
+                    break
+                i = first if step == 0 else (last - 1 if step == 1 else first + step - 1)
             b = _origin_hider(
                 origins[i],
                 found,
