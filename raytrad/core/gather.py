@@ -96,7 +96,17 @@ class GatherWeights:
         )
 
     def subset(self, keep: np.ndarray) -> GatherWeights:
-        """Only the near receivers where ``keep`` ((G,) bool) holds."""
+        """Only the near receivers where ``keep`` ((G,) bool) holds (itself when it holds
+        everywhere; the same entries when only rows without any are dropped)."""
+        keep = np.asarray(keep, dtype=bool)
+        if keep.all():
+            return self
+        ends = self.pointer[1:]
+        if (ends[~keep] == self.pointer[:-1][~keep]).all():  # empty rows alone go
+            pointer = np.concatenate([self.pointer[:1], ends[keep]])
+            return GatherWeights(
+                self.receivers[keep], self.factors[keep], pointer, self.sources, self.weights
+            )
         counts = np.diff(self.pointer)[keep]
         _, index = _csr_slots(self.pointer, np.flatnonzero(keep))
         pointer = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)

@@ -246,3 +246,38 @@ def test_means_of_the_nodes_a_gather_reads(cornell: Prepared) -> None:
         a, b = means.pointer[node], means.pointer[node + 1]
         expected = means.shares[a:b] @ radiosity[means.receivers[a:b]]
         np.testing.assert_allclose(whole[means.base + node], expected, rtol=1e-12)
+
+
+def test_subset_keeps_the_rows_asked_for_with_their_entries() -> None:
+    """``GatherWeights.subset`` against a row-by-row construction: keeping every row,
+    dropping only empty rows (the entries stay as they are), and dropping rows with
+    entries."""
+    rng = np.random.default_rng(8)
+    lengths = rng.integers(0, 4, 40)
+    lengths[::5] = 0
+    pointer = np.concatenate([[0], np.cumsum(lengths)]).astype(np.int64)
+    weights = GatherWeights(
+        np.arange(40) * 3,
+        rng.random(40),
+        pointer,
+        rng.integers(0, 100, pointer[-1]),
+        rng.random(pointer[-1]),
+    )
+
+    def by_rows(keep: np.ndarray) -> GatherWeights:
+        rows = np.flatnonzero(keep)
+        parts = [np.arange(pointer[r], pointer[r + 1]) for r in rows]
+        index = np.concatenate(parts).astype(np.int64)
+        return GatherWeights(
+            weights.receivers[rows],
+            weights.factors[rows],
+            np.concatenate([[0], np.cumsum([len(p) for p in parts])]).astype(np.int64),
+            weights.sources[index],
+            weights.weights[index],
+        )
+
+    assert weights.subset(np.ones(40, dtype=bool)) is weights
+    for keep in (lengths > 0, rng.random(40) < 0.6):
+        got, want = weights.subset(keep), by_rows(keep)
+        for name in ("receivers", "factors", "pointer", "sources", "weights"):
+            np.testing.assert_array_equal(getattr(got, name), getattr(want, name))
