@@ -489,11 +489,11 @@ class FormFactorEngine:
     def _compute(self, patch: int) -> Column:
         candidates = self._candidates(patch)
         factors, rays, gather = self._factors(
-            self._points[candidates],
-            self.mesh.receiver_normal[candidates],
-            self._origins[candidates],
+            np.take(self._points, candidates, axis=0),  # take: rows of a 2-D array at a
+            np.take(self.mesh.receiver_normal, candidates, axis=0),  # sixth of indexing's cost
+            np.take(self._origins, candidates, axis=0),
             patch,
-            None if self._sides is None else self._sides[candidates],
+            None if self._sides is None else np.take(self._sides, candidates, axis=0),
         )
         keep = factors > 0
         gather = gather.subset(keep[gather.receivers])
@@ -580,8 +580,14 @@ class FormFactorEngine:
 
         def work(patch: int) -> tuple[np.ndarray, np.ndarray, int, GatherWeights]:
             near = self._candidates(patch, points, normals, levels)
-            part = None if sides is None else sides[near]
-            found = self._factors(points[near], normals[near], origins[near], patch, part)
+            part = None if sides is None else np.take(sides, near, axis=0)
+            found = self._factors(
+                np.take(points, near, axis=0),
+                np.take(normals, near, axis=0),
+                np.take(origins, near, axis=0),
+                patch,
+                part,
+            )
             return order[near], found[0], found[1], compact_gather(found[2], self._index)
 
         patches = list(range(self.mesh.patch_count))

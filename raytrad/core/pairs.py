@@ -223,7 +223,7 @@ class PairFactors:
         if self.blockers is not None and doubt.any():
             hidden = np.zeros_like(doubt)
             hidden[doubt] = self.blockers.blocked(
-                origins[doubt],
+                np.compress(doubt, origins, axis=0),
                 self._corners[self._corner_ptr[patch] : self._corner_ptr[patch + 1]],
                 m.patch_center[patch],
                 float(self._corner_reach[patch]),
@@ -255,7 +255,7 @@ class PairFactors:
         near_hidden, node_hidden = hidden[: len(near_c)], hidden[len(near_c) :]
         pair = np.cumsum(close) - 1
         rows = np.flatnonzero(close)
-        far_c, far_s = np.nonzero(far[rows] & ~far_hidden[rows])
+        far_c, far_s = np.nonzero(np.take(far, rows, axis=0) & ~np.take(far_hidden, rows, axis=0))
         far_c = rows[far_c]
         n = close[near_c] & ~near_hidden
         h = close[node_c] & ~node_hidden
@@ -266,9 +266,9 @@ class PairFactors:
             pair[near_c[n]],
             near_tri[n],
             near_w[n],
-            near_share[n],
-            x[close],
-            nx[close],
+            np.compress(n, near_share, axis=0),
+            np.compress(close, x, axis=0),
+            np.compress(close, nx, axis=0),
         )
         near = np.flatnonzero(close)
         gather = GatherWeights(near, factors[near], pointer, sources, shares)
