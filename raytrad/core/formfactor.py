@@ -581,13 +581,8 @@ class FormFactorEngine:
         def work(patch: int) -> tuple[np.ndarray, np.ndarray, int, GatherWeights]:
             near = self._candidates(patch, points, normals, levels)
             part = None if sides is None else np.take(sides, near, axis=0)
-            found = self._factors(
-                np.take(points, near, axis=0),
-                np.take(normals, near, axis=0),
-                np.take(origins, near, axis=0),
-                patch,
-                part,
-            )
+            x, nx, o = (np.take(a, near, axis=0) for a in (points, normals, origins))
+            found = self._factors(x, nx, o, patch, part)
             return order[near], found[0], found[1], compact_gather(found[2], self._index)
 
         patches = list(range(self.mesh.patch_count))
