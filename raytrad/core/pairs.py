@@ -262,7 +262,7 @@ class PairFactors:
         pointer, sources, shares = self._shares.spread(
             pair[np.concatenate([far_c, node_c[h]])],
             np.concatenate([self._tree.root[far_s + sub.start], node[h]]),
-            np.concatenate([weight[far_c, far_s], node_w[h]]),
+            np.concatenate([weight.reshape(-1)[far_c * weight.shape[1] + far_s], node_w[h]]),
             pair[near_c[n]],
             near_tri[n],
             near_w[n],
@@ -296,7 +296,7 @@ class PairFactors:
         near_hidden : (B,) bool, blocked near items (triangles and clusters)
         rays : int
         """
-        far_hidden = np.zeros_like(far)
+        far_hidden = np.zeros(far.shape, dtype=bool)  # C order: written through a flat view
         near_hidden = np.zeros(len(near_c), dtype=bool)
         if self.occluder is None or not doubt.any():
             return unoccluded, far_hidden, near_hidden, 0
@@ -306,13 +306,14 @@ class PairFactors:
             far & doubt[:, None],
             self._sub_target[sub],
             near_c[traced],
-            near_target[traced],
+            np.compress(traced, near_target, axis=0),
             self.occluder.origin,
             0.5 * tol.ray_offset * self.diagonal,
         )
         blocked = self.occluder.occluded_local(o, d, t)
         count = len(far_c)
-        far_hidden[far_c[blocked[:count]], far_s[blocked[:count]]] = True
+        flat = (far_c * far.shape[1] + far_s)[blocked[:count]]  # flat: faster than 2-D
+        far_hidden.reshape(-1)[flat] = True
         near_hidden[np.flatnonzero(traced)[blocked[count:]]] = True
         factors = visible_factors(
             unoccluded, doubt, weight, far_hidden, near_c, near_w, near_hidden
