@@ -104,13 +104,37 @@ def test_refined_engine_gathers_as_a_fresh_one(
         np.testing.assert_allclose(ga.weights, gb.weights, rtol=1e-12, atol=1e-15)
 
 
+def _final_gather(
+    solved: tuple[Prepared, SolveResult],
+    points: np.ndarray,
+    normals: np.ndarray,
+    reflectance: np.ndarray,
+    emitted: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray, int]:
+    """:func:`final_gather` at points of the solved Cornell box: their radiosity, which
+    are shut in, and the visibility rays the gather cast."""
+    prepared, result = solved
+    before = prepared.engine.rays_cast
+    out, shut = final_gather(
+        prepared.scene,
+        prepared.engine,
+        prepared.occluder,
+        result.radiosity,
+        patch_means(prepared.mesh, result.radiosity),
+        points,
+        normals,
+        reflectance,
+        emitted,
+    )
+    return out, shut, prepared.engine.rays_cast - before
+
+
 def test_black_points_show_their_emission_without_rays(
     cornell_fine: tuple[Prepared, SolveResult],
 ) -> None:
     """A point of zero reflectance gathers nothing (B = E): no factor, no ray; the other
     points gather exactly what they gather without it."""
-    prepared, result = cornell_fine
-    mesh, engine = prepared.mesh, prepared.engine
+    mesh, engine = cornell_fine[0].mesh, cornell_fine[0].engine
     rng = np.random.default_rng(4)
     pick = rng.choice(mesh.receiver_count, 300, replace=False)
     points, _ = receiver_points(mesh, 1e-6 * engine.diagonal)
@@ -120,22 +144,10 @@ def test_black_points_show_their_emission_without_rays(
     black = np.arange(len(pick)) % 3 == 0
     rho[black] = 0.0
     emitted[black] = rng.uniform(0.0, 5.0, (int(black.sum()), 3))
-    means = patch_means(mesh, result.radiosity)
 
     def gathered(keep: np.ndarray) -> tuple[np.ndarray, int]:
-        before = engine.rays_cast
-        out, _ = final_gather(
-            prepared.scene,
-            engine,
-            prepared.occluder,
-            result.radiosity,
-            means,
-            x[keep],
-            n[keep],
-            rho[keep],
-            emitted[keep],
-        )
-        return out, engine.rays_cast - before
+        out, _, rays = _final_gather(cornell_fine, x[keep], n[keep], rho[keep], emitted[keep])
+        return out, rays
 
     every, every_rays = gathered(np.ones(len(pick), dtype=bool))
     lit, lit_rays = gathered(~black)
@@ -151,8 +163,7 @@ def test_shut_in_points_show_their_emission_without_rays(
     """A point shut in (the floor under a block, found by its probe rays) keeps its
     emission: it casts no visibility ray and gets no factor, and the other points gather
     exactly what they gather without it."""
-    prepared, result = cornell_fine
-    mesh, engine = prepared.mesh, prepared.engine
+    mesh, engine = cornell_fine[0].mesh, cornell_fine[0].engine
     hidden = np.flatnonzero(mesh.receiver_area == 0)
     seen = np.flatnonzero(mesh.receiver_area > 0)
     assert len(hidden) >= 20
@@ -160,22 +171,15 @@ def test_shut_in_points_show_their_emission_without_rays(
     pick = np.concatenate([rng.choice(hidden, 20, replace=False), rng.choice(seen, 100)])
     points, _ = receiver_points(mesh, tol.ray_offset * engine.diagonal)
     emitted = rng.uniform(0.0, 5.0, (len(pick), 3))
-    means = patch_means(mesh, result.radiosity)
 
     def gathered(keep: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:
-        before = engine.rays_cast
-        out, shut = final_gather(
-            prepared.scene,
-            engine,
-            prepared.occluder,
-            result.radiosity,
-            means,
+        return _final_gather(
+            cornell_fine,
             points[pick][keep],
             mesh.receiver_normal[pick][keep],
             mesh.receiver_reflectance[pick][keep],
             emitted[keep],
         )
-        return out, shut, engine.rays_cast - before
 
     every, shut, every_rays = gathered(np.ones(len(pick), dtype=bool))
     assert shut[:20].all() and not shut[20:].any()
