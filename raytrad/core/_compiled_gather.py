@@ -1,7 +1,8 @@
 """The gather loops behind :mod:`raytrad.core.compiled`, written for numba (imported only
 there): how near receivers' gather weights are summed per source and gathered (their
-spread over sub-areas' corners, `subarea_spread`, lives with the triangle loops it shares
-in :mod:`raytrad.core._compiled_kernels`). Plain Python as written
+spread over sub-areas' corners, ``spread_shares``, lives with the triangle loops it shares
+in :mod:`raytrad.core._compiled_near`, and sums with :func:`_add` and :func:`_emit`).
+Plain Python as written
 here; :func:`raytrad.core.compiled.get` compiles every function in :data:`KERNELS`, as for
 :mod:`raytrad.core._compiled_kernels`. Each computes the same formula, in the same order,
 as its numpy reference in :mod:`raytrad.core.gather`; see there for shapes and units.
@@ -11,9 +12,16 @@ as its numpy reference in :mod:`raytrad.core.gather`; see there for shapes and u
 
 import numpy as np
 
+#: The helpers that allocate nothing and return no array, compiled without reference
+#: counting (see :func:`raytrad.core.compiled._jit`): the spread calls them once an entry.
+BORROWING = ("_add", "_emit")
+
 #: Every function to compile, each after the helpers it calls.
 KERNELS = (
     "_sort_ascending",
+    "by_pair",
+    "_add",
+    "_emit",
     "sum_shares",
     "_gathered",
     "gather_sums",
@@ -43,20 +51,10 @@ def sum_shares(pair, source, weight, pairs):
     """Positive weights summed per (pair, source), sources ascending within a pair,
     normalised to sum 1 per pair (see :func:`raytrad.core.gather.numpy_sum_shares`; the
     same sums in the same order). ``pair`` need not be sorted: a stable counting sort
-    groups it, and each pair's sources are summed in a dense scratch row."""
+    groups it (:func:`by_pair`), and each pair's sources are summed in a dense scratch
+    row."""
     n = len(pair)
-    pointer = np.zeros(pairs + 1, dtype=np.int64)
-    for i in range(n):
-        if weight[i] > 0.0:
-            pointer[pair[i] + 1] += 1
-    for p in range(pairs):
-        pointer[p + 1] += pointer[p]
-    fill = pointer[:-1].copy()
-    order = np.empty(pointer[pairs], dtype=np.int64)
-    for i in range(n):
-        if weight[i] > 0.0:
-            order[fill[pair[i]]] = i
-            fill[pair[i]] += 1
+    pointer, order = by_pair(pair, pairs)
     top = 0
     for i in range(n):
         top = max(top, source[i])
@@ -70,25 +68,53 @@ def sum_shares(pair, source, weight, pairs):
         used = np.int64(0)
         for k in range(pointer[p], pointer[p + 1]):
             i = order[k]
-            s = source[i]
-            if scratch[s] == 0.0:
-                touched[used] = s
-                used += 1
-            scratch[s] += weight[i]
-        _sort_ascending(touched, used)
-        ascending = touched
-        total = 0.0
-        for k in range(used):
-            s = ascending[k]
-            out_source[count + k] = s
-            out_weight[count + k] = scratch[s]
-            total += scratch[s]
-            scratch[s] = 0.0
-        for k in range(used):
-            out_weight[count + k] /= total
-        count += used
+            used = _add(source[i], weight[i], scratch, touched, used)
+        count = _emit(touched, used, scratch, out_source, out_weight, count)
         out_pointer[p + 1] = count
     return out_pointer, out_source[:count].copy(), out_weight[:count].copy()
+
+
+def by_pair(pair, pairs):
+    """A stable counting sort of the indices of ``pair`` (values below ``pairs``): CSR
+    ``pointer`` (pairs + 1,) into ``order`` (N,), both int64."""
+    pointer = np.zeros(pairs + 1, dtype=np.int64)
+    for i in range(len(pair)):
+        pointer[pair[i] + 1] += 1
+    for p in range(pairs):
+        pointer[p + 1] += pointer[p]
+    fill = pointer[:-1].copy()
+    order = np.empty(len(pair), dtype=np.int64)
+    for i in range(len(pair)):
+        order[fill[pair[i]]] = i
+        fill[pair[i]] += 1
+    return pointer, order
+
+
+def _add(source, weight, scratch, touched, used):
+    """A positive ``weight`` added to ``scratch[source]``, the source listed in
+    ``touched[used]`` when it is the first of its pair; returns the new count listed."""
+    if weight > 0.0:
+        if scratch[source] == 0.0:
+            touched[used] = source
+            used += 1
+        scratch[source] += weight
+    return used
+
+
+def _emit(touched, used, scratch, out_source, out_weight, count):
+    """One pair's sums from ``scratch`` into ``out_*[count:]``, sources ascending and
+    weights normalised to sum 1 (``scratch`` left zero); returns the new count."""
+    _sort_ascending(touched, used)
+    total = 0.0
+    for k in range(used):
+        s = touched[k]
+        out_source[count + k] = s
+        out_weight[count + k] = scratch[s]
+        total += scratch[s]
+        scratch[s] = 0.0
+    for k in range(used):
+        out_weight[count + k] /= total
+    return count + used
 
 
 def _gathered(g, pointer, sources, weights, radiosity):

@@ -1,12 +1,13 @@
 """The near field's loops behind :mod:`raytrad.core.compiled`, written for numba (imported
 only there): the walk through a sub-area's cluster tree, a near (receiver, sub-area)
-pair's elements, and the spread of a node's weight over receivers and means.
+pair's elements, and the spread of the elements' weights over receivers and means,
+summed per source (with :mod:`raytrad.core._compiled_gather`'s sums).
 
 Plain Python as written here, compiled like :mod:`raytrad.core._compiled_kernels`, whose
 compiled helpers these call through the module (bound compiled by the time these run).
 Each computes the same formula, in the same order, as its numpy reference:
 :meth:`raytrad.core.pairs.PairFactors._numpy_near_field`,
-:func:`raytrad.core.spread.numpy_subarea_spread`, :func:`raytrad.core.clusters.numpy_cuts`.
+:func:`raytrad.core.spread.numpy_spread_shares`, :func:`raytrad.core.clusters.numpy_cuts`.
 """
 
 # mypy: ignore-errors
@@ -15,12 +16,20 @@ import math
 
 import numpy as np
 
+from raytrad.core import _compiled_gather as _g
 from raytrad.core import _compiled_kernels as _k
 
 #: The helpers that allocate nothing and return no array, compiled without reference
 #: counting (see :func:`raytrad.core.compiled._jit`): a near triangle's step alone passed
 #: some 20 arrays a call, each counted in and out.
-BORROWING = ("_triangle_corner_weights", "_cut", "_disk", "_triangle")
+BORROWING = (
+    "_triangle_corner_weights",
+    "_cut",
+    "_disk",
+    "_triangle",
+    "_node_items",
+    "_corner_items",
+)
 
 #: Every function to compile, each after the helpers it calls.
 KERNELS = (
@@ -29,7 +38,9 @@ KERNELS = (
     "_disk",
     "_buffers",
     "_triangle",
-    "subarea_spread",
+    "_node_items",
+    "_corner_items",
+    "spread_shares",
     "near_triangles",
 )
 
@@ -116,7 +127,7 @@ def _buffers(nodes, start, stop):
     return np.empty(STACK, dtype=np.int64), np.empty(longest, dtype=np.int64)
 
 
-def subarea_spread(
+def spread_shares(
     sub_pair,
     nodes,
     sub_weight,
@@ -139,17 +150,22 @@ def subarea_spread(
     tri_weight,
     tri_share,
 ):
-    """Node elements' weights on receivers and means (see
-    :func:`raytrad.core.spread.numpy_subarea_spread`; handed elements first, then the
-    near ones, each in element order, its items in the order of their slots), then the
-    triangle elements' weights on their corners (``tri_*``, see
-    :func:`raytrad.core.spread.numpy_corner_elements`). ``tree`` is
+    """The node elements' and triangle elements' weights on receivers and means, summed
+    per (pair, source) and normalised per pair, in one loop: what
+    :func:`raytrad.core.gather.numpy_sum_shares` makes of
+    :func:`raytrad.core.spread.numpy_subarea_spread`'s and
+    :func:`raytrad.core.spread.numpy_corner_elements`' entries (CSR ``pointer`` by pair,
+    ``sources`` ascending within one, ``weights``). A pair's entries are summed in the
+    order the entries of a spread would come (its nodes handed on whole, then its near
+    nodes' items in the order of their slots, then its triangles' corners, each in element
+    order), without the entries being written out. ``tree`` is
     :attr:`raytrad.core.clusters.Clusters.arrays`."""
-    sub_tri, start, stop, left, right, node_point, node_normal, node_area = tree
+    _, start, stop, left, right, node_point, _, _ = tree
     n = len(nodes)
     far = np.empty(n, dtype=np.bool_)
     stack, cut = _buffers(nodes, start, stop)
-    count = 0
+    count = 3 * len(triangles)
+    widest = 0
     for a in range(n):
         s, p = nodes[a], sub_pair[a]
         dx = points[p, 0] - node_point[s, 0]
@@ -160,80 +176,124 @@ def subarea_spread(
             count += 1 if mean_ptr[s + 1] > mean_ptr[s] else 0
             continue
         m = _cut(s, points[p], node_reach, left, right, node_point, stack, cut)
+        items = 0
         for q in range(m):
             item = cut[q]
             if item >= 0:
-                count += 1 if mean_ptr[item + 1] > mean_ptr[item] else 0
+                items += 1 if mean_ptr[item + 1] > mean_ptr[item] else 0
             else:
-                count += 3 * (stop[-1 - item] - start[-1 - item])
-    count += 3 * len(triangles)
-    out_pair = np.empty(count, dtype=np.int64)
+                items += 3 * (stop[-1 - item] - start[-1 - item])
+        count += items
+        widest = max(widest, items)
+    node_ptr, node_order = _g.by_pair(sub_pair, len(points))
+    tri_ptr, tri_order = _g.by_pair(tri_pair, len(points))
+    item_source = np.empty(widest, dtype=np.int64)
+    item_weight = np.empty(widest)
+    item_area = np.empty(widest)  # each item's visible area: its weight when nothing is seen
+    scratch = np.zeros(base + len(start))
+    touched = np.empty(count, dtype=np.int64)
     out_source = np.empty(count, dtype=np.int64)
     out_weight = np.empty(count)
-    out_area = np.empty(count)  # each entry's visible area: its weight when nothing is seen
-    i = 0
-    for a in range(n):
-        s = nodes[a]
-        if far[a] and mean_ptr[s + 1] > mean_ptr[s]:  # the node's mean
-            out_pair[i] = sub_pair[a]
-            out_source[i] = base + s
-            out_weight[i] = sub_weight[a]
-            i += 1
-    raw = np.empty(3)
-    for a in range(n):
-        if far[a]:
-            continue
-        s, p = nodes[a], sub_pair[a]
-        x, nx = points[p], normals[p]
-        first = i
-        total = 0.0
-        m = _cut(s, x, node_reach, left, right, node_point, stack, cut)
-        for q in range(m):
-            item = cut[q]
-            if item >= 0:
-                if mean_ptr[item + 1] > mean_ptr[item]:
-                    w = _disk(x, nx, node_point[item], node_normal[item], node_area[item])
-                    out_pair[i], out_source[i], out_weight[i] = p, base + item, w
-                    out_area[i] = node_visible[item]
-                    total += w
-                    i += 1
-                continue
-            leaf = -1 - item
-            for slot in range(start[leaf], stop[leaf]):
-                t = sub_tri[slot]
-                _triangle_corner_weights(
-                    tri_corners[t], tri_normal[t], x, nx, rule, rule_weight, raw
+    out_pointer = np.zeros(len(points) + 1, dtype=np.int64)
+    tables = (node_reach, node_visible, visible_area, corner_share)
+    triangle_tables = (corners, tri_corners, tri_normal, mean_ptr)
+    rules = (rule, rule_weight)
+    work = (stack, cut, np.empty(3))
+    buffers = (item_source, item_weight, item_area)
+    done = 0
+    for p in range(len(points)):
+        used = np.int64(0)
+        for r in range(node_ptr[p], node_ptr[p + 1]):  # the nodes handed on whole
+            a = node_order[r]
+            s = nodes[a]
+            if far[a] and mean_ptr[s + 1] > mean_ptr[s]:
+                used = _g._add(base + s, sub_weight[a], scratch, touched, used)
+        for r in range(node_ptr[p], node_ptr[p + 1]):
+            a = node_order[r]
+            if not far[a]:
+                element = (nodes[a], sub_weight[a], base)
+                view = (points[p], normals[p])
+                items = _node_items(
+                    element, view, tree, tables, triangle_tables, rules, work, buffers
                 )
-                seen = 0.0
-                for v in range(3):
-                    if corner_share[t, v] > 0.0:
-                        seen += raw[v]
-                scale = (raw[0] + raw[1] + raw[2]) / seen if seen > 0.0 else 0.0
-                for v in range(3):
-                    w = raw[v] * scale if corner_share[t, v] > 0.0 else 0.0
-                    out_pair[i], out_source[i], out_weight[i] = p, corners[t, v], w
-                    out_area[i] = visible_area[t] * corner_share[t, v]
-                    total += w
-                    i += 1
-        if not total > 0.0:  # seeing none of it: the sampled weight by visible area
-            scale = sub_weight[a] / node_visible[s] if node_visible[s] > 0.0 else 0.0
-            for j in range(first, i):
-                out_weight[j] = scale * out_area[j]
-    for b in range(len(triangles)):  # a hidden corner's share goes to the others
-        t = triangles[b]
-        own0 = tri_share[b, 0] if corner_share[t, 0] > 0.0 else 0.0
-        own1 = tri_share[b, 1] if corner_share[t, 1] > 0.0 else 0.0
-        own2 = tri_share[b, 2] if corner_share[t, 2] > 0.0 else 0.0
-        seen = own0 + own1 + own2
-        if seen > 0.0:
-            own0, own1, own2 = own0 / seen, own1 / seen, own2 / seen
-        else:
-            own0, own1, own2 = corner_share[t, 0], corner_share[t, 1], corner_share[t, 2]
-        w = tri_weight[b]
-        for v, own in ((0, own0), (1, own1), (2, own2)):
-            out_pair[i], out_source[i], out_weight[i] = tri_pair[b], corners[t, v], w * own
-            i += 1
-    return out_pair, out_source, out_weight
+                for j in range(items):
+                    used = _g._add(item_source[j], item_weight[j], scratch, touched, used)
+        for r in range(tri_ptr[p], tri_ptr[p + 1]):
+            b = tri_order[r]
+            used = _corner_items(
+                b, triangles, tri_weight, tri_share, corner_share, corners, scratch, touched, used
+            )
+        done = _g._emit(touched, used, scratch, out_source, out_weight, done)
+        out_pointer[p + 1] = done
+    return out_pointer, out_source[:done].copy(), out_weight[:done].copy()
+
+
+def _node_items(element, view, tree, tables, triangle_tables, rules, work, buffers):
+    """A near node element (``element``: node, sampled weight, the means' ``base``) seen
+    from ``view`` (x, nx): its items' sources and weights into ``buffers``
+    (``item_source``, ``item_weight``, ``item_area``), in the order of their slots;
+    returns their count (see :func:`spread_shares`, which packs the other tuples)."""
+    s, weight, base = element
+    x, nx = view
+    node_reach, node_visible, visible_area, corner_share = tables
+    corners, tri_corners, tri_normal, mean_ptr = triangle_tables
+    rule, rule_weight = rules
+    stack, cut, raw = work
+    item_source, item_weight, item_area = buffers
+    sub_tri, start, stop, left, right, node_point, node_normal, node_area = tree
+    i = 0
+    total = 0.0
+    m = _cut(s, x, node_reach, left, right, node_point, stack, cut)
+    for q in range(m):
+        item = cut[q]
+        if item >= 0:
+            if mean_ptr[item + 1] > mean_ptr[item]:
+                w = _disk(x, nx, node_point[item], node_normal[item], node_area[item])
+                item_source[i], item_weight[i] = base + item, w
+                item_area[i] = node_visible[item]
+                total += w
+                i += 1
+            continue
+        leaf = -1 - item
+        for slot in range(start[leaf], stop[leaf]):
+            t = sub_tri[slot]
+            _triangle_corner_weights(tri_corners[t], tri_normal[t], x, nx, rule, rule_weight, raw)
+            seen = 0.0
+            for v in range(3):
+                if corner_share[t, v] > 0.0:
+                    seen += raw[v]
+            scale = (raw[0] + raw[1] + raw[2]) / seen if seen > 0.0 else 0.0
+            for v in range(3):
+                w = raw[v] * scale if corner_share[t, v] > 0.0 else 0.0
+                item_source[i], item_weight[i] = corners[t, v], w
+                item_area[i] = visible_area[t] * corner_share[t, v]
+                total += w
+                i += 1
+    if not total > 0.0:  # seeing none of it: the sampled weight by visible area
+        scale = weight / node_visible[s] if node_visible[s] > 0.0 else 0.0
+        for j in range(i):
+            item_weight[j] = scale * item_area[j]
+    return i
+
+
+def _corner_items(
+    b, triangles, tri_weight, tri_share, corner_share, corners, scratch, touched, used
+):
+    """Triangle element ``b``'s weight added over its corners (a hidden corner's share
+    going to the others; see :func:`spread_shares`); returns the new count listed."""
+    t = triangles[b]
+    own0 = tri_share[b, 0] if corner_share[t, 0] > 0.0 else 0.0
+    own1 = tri_share[b, 1] if corner_share[t, 1] > 0.0 else 0.0
+    own2 = tri_share[b, 2] if corner_share[t, 2] > 0.0 else 0.0
+    seen = own0 + own1 + own2
+    if seen > 0.0:
+        own0, own1, own2 = own0 / seen, own1 / seen, own2 / seen
+    else:
+        own0, own1, own2 = corner_share[t, 0], corner_share[t, 1], corner_share[t, 2]
+    w = tri_weight[b]
+    used = _g._add(corners[t, 0], w * own0, scratch, touched, used)
+    used = _g._add(corners[t, 1], w * own1, scratch, touched, used)
+    return _g._add(corners[t, 2], w * own2, scratch, touched, used)
 
 
 def _triangle(tri, m, x, n, limits, rules, scratch, target, shares, factor, k):

@@ -201,7 +201,7 @@ SIGNATURES: dict[str, list[list[str]]] = {
             "Array(bool, 1, 'C', False, aligned=True)",
         ],
     ],
-    "subarea_spread": [
+    "spread_shares": [
         [
             "Array(int64, 1, 'C', False, aligned=True)",
             "Array(int64, 1, 'C', False, aligned=True)",
@@ -260,20 +260,20 @@ SIGNATURES: dict[str, list[list[str]]] = {
 
 SECONDS: dict[str, float] = {
     "block_irradiance": 0.26,
-    "blocked_pairs": 1.77,
+    "blocked_pairs": 1.79,
     "column_final": 0.08,
-    "column_sweep": 0.14,
-    "near_triangles": 3.74,
-    "patch_average": 0.27,
-    "patch_spread": 0.39,
-    "patch_spread_rows": 0.20,
-    "piecewise_contour_form_factor": 1.47,
-    "planar_contour_form_factor": 1.21,
-    "sample_weights": 0.50,
-    "shaft_clear": 1.28,
-    "shoot": 1.37,
-    "subarea_spread": 1.64,
-    "sum_shares": 0.80,
+    "column_sweep": 0.15,
+    "near_triangles": 3.82,
+    "patch_average": 0.28,
+    "patch_spread": 0.40,
+    "patch_spread_rows": 0.21,
+    "piecewise_contour_form_factor": 1.54,
+    "planar_contour_form_factor": 1.25,
+    "sample_weights": 0.53,
+    "shaft_clear": 1.32,
+    "shoot": 1.29,
+    "spread_shares": 2.96,
+    "sum_shares": 1.10,
     "visibility_rays": 0.54,
-    "visible_factors": 0.41,
+    "visible_factors": 0.42,
 }

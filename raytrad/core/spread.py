@@ -18,7 +18,7 @@ from raytrad.core.gather import (
     MIDPOINT_SIZES,
     cluster_means,
     corner_shares,
-    sum_shares,
+    numpy_sum_shares,
     visible_areas,
 )
 from raytrad.core.mesh import RadiosityMesh
@@ -30,8 +30,8 @@ class GatherShares:
 
     A near triangle's weight goes to its visible corners by the shares it comes with
     (what the receiver sees of each part of it); a node's (a sub-area or a cluster) to
-    what the receiver resolves of it (:func:`subarea_spread`). Hidden receivers (shut in
-    under a block) get nothing: their radiosity is not what the triangle shows.
+    what the receiver resolves of it (:func:`numpy_subarea_spread`). Hidden receivers
+    (shut in under a block) get nothing: their radiosity is not what the triangle shows.
 
     Parameters
     ----------
@@ -89,7 +89,7 @@ class GatherShares:
         sources : (S,) int64
         weights : (S,) float64, normalised to sum 1 per pair (pairs with no weight: empty)
         """
-        pair, source, weight = subarea_spread(
+        return spread_shares(
             sub_pair,
             nodes,
             sub_weight,
@@ -98,10 +98,9 @@ class GatherShares:
             self,
             (tri_pair, triangles, tri_weight, tri_share),
         )
-        return sum_shares(pair, source, weight, len(points))
 
 
-def subarea_spread(
+def spread_shares(
     sub_pair: np.ndarray,
     nodes: np.ndarray,
     sub_weight: np.ndarray,
@@ -110,22 +109,14 @@ def subarea_spread(
     shares: GatherShares,
     triangles: tuple[np.ndarray, ...] | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Node elements' weights on receivers and means, then those of ``triangles``'
-    elements (``(tri_pair, triangle, tri_weight, tri_share)`` of
-    :func:`numpy_corner_elements`) on their corners; compiled when available, in one
-    loop, else :func:`numpy_subarea_spread` and :func:`numpy_corner_elements`, the
-    references."""
+    """:meth:`GatherShares.spread`: compiled when available, in one loop that sums each
+    pair's weights as it spreads them, else :func:`numpy_spread_shares`, the reference
+    (the same sums, in another order: equal to about 1e-15)."""
     if triangles is None:
         triangles = (_NO_INTS, _NO_INTS, np.zeros(0), np.zeros((0, 3)))
-    tri_pair, triangle, tri_weight, tri_share = triangles
     fast = compiled.get()
     if fast is None:
-        nodes_part = numpy_subarea_spread(sub_pair, nodes, sub_weight, points, normals, shares)
-        corners_part = numpy_corner_elements(tri_pair, triangle, tri_weight, tri_share, shares)
-        pair, source, weight = (
-            np.concatenate([a, b]) for a, b in zip(nodes_part, corners_part, strict=True)
-        )
-        return pair, source, weight
+        return numpy_spread_shares(sub_pair, nodes, sub_weight, points, normals, shares, triangles)
     tree, means = shares.tree, shares.means
 
     def ints(a: np.ndarray) -> np.ndarray:
@@ -134,7 +125,8 @@ def subarea_spread(
     def floats(a: np.ndarray) -> np.ndarray:
         return np.ascontiguousarray(a, dtype=np.float64)
 
-    pair, source, weight = fast.subarea_spread(
+    tri_pair, triangle, tri_weight, tri_share = triangles
+    pointer, sources, weights = fast.spread_shares(
         ints(sub_pair),
         ints(nodes),
         floats(sub_weight),
@@ -157,7 +149,29 @@ def subarea_spread(
         floats(tri_weight),
         floats(tri_share),
     )
-    return pair, source, weight
+    return pointer, sources, weights
+
+
+def numpy_spread_shares(
+    sub_pair: np.ndarray,
+    nodes: np.ndarray,
+    sub_weight: np.ndarray,
+    points: np.ndarray,
+    normals: np.ndarray,
+    shares: GatherShares,
+    triangles: tuple[np.ndarray, ...],
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The nodes' entries (:func:`numpy_subarea_spread`) and the triangles'
+    (:func:`numpy_corner_elements` of ``triangles``, ``(tri_pair, triangle, tri_weight,
+    tri_share)``) summed per (pair, source) and normalised
+    (:func:`~raytrad.core.gather.numpy_sum_shares`); see :meth:`GatherShares.spread`."""
+    nodes_part = numpy_subarea_spread(sub_pair, nodes, sub_weight, points, normals, shares)
+    tri_pair, triangle, tri_weight, tri_share = triangles
+    corners_part = numpy_corner_elements(tri_pair, triangle, tri_weight, tri_share, shares)
+    pair, source, weight = (
+        np.concatenate([a, b]) for a, b in zip(nodes_part, corners_part, strict=True)
+    )
+    return numpy_sum_shares(pair, source, weight, len(points))
 
 
 #: An empty index array (no triangle elements).

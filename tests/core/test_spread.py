@@ -17,8 +17,9 @@ from raytrad.core.spread import (
     GatherShares,
     corner_form_factors,
     numpy_corner_elements,
+    numpy_spread_shares,
     numpy_subarea_spread,
-    subarea_spread,
+    spread_shares,
 )
 from raytrad.scene.builder import quads_scene
 from raytrad.scene.builtin import cornell_box
@@ -50,27 +51,56 @@ def _elements(mesh: RadiosityMesh, shares: GatherShares, seed: int) -> tuple[np.
     return sub_pair, nodes, rng.random(len(nodes)), points, normals
 
 
+def _dense(spread: tuple[np.ndarray, ...], stride: int) -> np.ndarray:
+    """(pairs, stride) weights of a spread's CSR (pointer, sources, weights)."""
+    pointer, sources, weights = spread
+    out = np.zeros((len(pointer) - 1, stride))
+    out[np.repeat(np.arange(len(pointer) - 1), np.diff(pointer)), sources] = weights
+    return out
+
+
+def _check_csr(spread: tuple[np.ndarray, ...]) -> None:
+    """Sources ascending and distinct within a pair, weights positive summing to 1."""
+    pointer, sources, weights = spread
+    assert pointer[0] == 0 and pointer[-1] == len(sources) == len(weights)
+    assert (weights > 0).all()
+    for p in range(len(pointer) - 1):
+        row = slice(pointer[p], pointer[p + 1])
+        assert (np.diff(sources[row]) > 0).all()
+        if pointer[p + 1] > pointer[p]:
+            assert abs(weights[row].sum() - 1.0) < 1e-12
+
+
 @pytest.mark.skipif(compiled.get() is None, reason="numba is not installed")
-def test_compiled_subarea_spread_matches_numpy(mesh: RadiosityMesh) -> None:
+def test_compiled_spread_matches_numpy(mesh: RadiosityMesh) -> None:
     """On the coarse patching (clusters taken whole) and on a finer one (sub-areas far
-    enough to hand their weight on whole)."""
+    enough to hand their weight on whole), with triangle elements beside the nodes: the
+    compiled loop that sums as it spreads against the reference's entries summed by
+    numpy."""
     kinds = np.zeros(3, int)
     finer = build_mesh(cornell_box(), replace(CORNELL_MESH, samples=2, emitter_samples=4))
     for each in (mesh, finer):
         shares = GatherShares(each, *subarea_triangles(each))
         sub_pair, nodes, weight, points, normals = _elements(each, shares, 5)
-        fast = subarea_spread(sub_pair, nodes, weight, points, normals, shares)
-        slow = numpy_subarea_spread(sub_pair, nodes, weight, points, normals, shares)
-        base = each.receiver_count
-        stride = base + shares.tree.count
-        totals = [
-            np.bincount(p * stride + s, weights=w, minlength=200 * stride)
-            for p, s, w in (fast, slow)
-        ]
-        np.testing.assert_allclose(totals[0], totals[1], rtol=1e-12, atol=1e-15 * totals[1].max())
+        rng = np.random.default_rng(11)
+        triangles = rng.integers(0, len(each.triangles), 300)
+        elements = (
+            rng.integers(0, 200, 300),
+            triangles,
+            rng.random(300),
+            rng.dirichlet(np.ones(3), 300),
+        )
+        fast = spread_shares(sub_pair, nodes, weight, points, normals, shares, elements)
+        slow = numpy_spread_shares(sub_pair, nodes, weight, points, normals, shares, elements)
+        np.testing.assert_array_equal(fast[0], slow[0])
+        np.testing.assert_array_equal(fast[1], slow[1])
+        np.testing.assert_allclose(fast[2], slow[2], rtol=1e-12, atol=1e-15)
+        _check_csr(fast)
         # the three kinds of entries: nodes handed on whole, clusters, triangles' corners
-        handed = np.isin(slow[1] - base, nodes)
-        kinds += [handed.sum(), ((slow[1] >= base) & ~handed).sum(), (slow[1] < base).sum()]
+        entries = numpy_subarea_spread(sub_pair, nodes, weight, points, normals, shares)[1]
+        base = each.receiver_count
+        handed = np.isin(entries - base, nodes)
+        kinds += [handed.sum(), ((entries >= base) & ~handed).sum(), (entries < base).sum()]
     assert kinds.min() > 20, kinds
 
 
@@ -78,10 +108,10 @@ def test_compiled_subarea_spread_matches_numpy(mesh: RadiosityMesh) -> None:
 def test_triangle_elements_spread_over_their_seen_corners_as_numpy_does(
     mesh: RadiosityMesh, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    """The compiled spread appends the triangle elements' corner weights in the loop that
-    spreads the nodes: the same entries, to the bit, as :func:`numpy_corner_elements`,
-    with hidden corners' shares moved to the seen ones (a triangle with every corner
-    hidden, whose corners' own shares are 0, gives nothing)."""
+    """A triangle element's weight goes to its seen corners, a hidden corner's share moved
+    to the others (a triangle with every corner hidden, whose corners' own shares are 0,
+    gives nothing); the compiled spread sums them with the nodes' as the reference does,
+    and the numpy path is the reference."""
     shares = GatherShares(mesh, *subarea_triangles(mesh))
     rng = np.random.default_rng(3)
     sub_pair, nodes, weight, points, normals = _elements(mesh, shares, 8)
@@ -92,20 +122,30 @@ def test_triangle_elements_spread_over_their_seen_corners_as_numpy_does(
     shares.corner_share[triangles[40:45]] = 0.0  # all hidden
     tri_share = rng.dirichlet(np.ones(3), count)
     elements = (rng.integers(0, 200, count), triangles, rng.random(count), tri_share)
-    fast = subarea_spread(sub_pair, nodes, weight, points, normals, shares, elements)
     reference = numpy_corner_elements(*elements, shares)
-    for a, b in zip(fast, reference, strict=True):
-        np.testing.assert_array_equal(a[-3 * count :], b)
     spread = reference[2].reshape(-1, 3)
     assert (spread[shares.corner_share[triangles] == 0] == 0).all()  # hidden: nothing
     seen = (shares.corner_share[triangles] > 0).any(axis=1)
     assert (~seen).sum() >= 5
     np.testing.assert_allclose(spread[seen].sum(axis=1), elements[2][seen], rtol=1e-14)
+    # triangles alone: each pair's weights are its corners' entries summed, normalised
+    none = np.zeros(0, np.int64)
+    alone = spread_shares(none, none, np.zeros(0), points, normals, shares, elements)
+    stride = mesh.receiver_count
+    totals = np.bincount(
+        reference[0] * stride + reference[1], weights=reference[2], minlength=200 * stride
+    ).reshape(200, stride)
+    expected = totals / np.where(totals.sum(axis=1) > 0, totals.sum(axis=1), 1.0)[:, None]
+    np.testing.assert_allclose(_dense(alone, stride), expected, rtol=1e-13, atol=1e-16)
+    # with the nodes
+    fast = spread_shares(sub_pair, nodes, weight, points, normals, shares, elements)
     monkeypatch.setattr(compiled, "get", lambda: None)
-    slow = subarea_spread(sub_pair, nodes, weight, points, normals, shares, elements)
-    for a, b in zip(slow, reference, strict=True):
-        np.testing.assert_array_equal(a[-3 * count :], b)
-    assert len(slow[0]) - 3 * count > 0  # the nodes' entries come first
+    slow = spread_shares(sub_pair, nodes, weight, points, normals, shares, elements)
+    reference_csr = numpy_spread_shares(sub_pair, nodes, weight, points, normals, shares, elements)
+    for a, b in zip(slow, reference_csr, strict=True):
+        np.testing.assert_array_equal(a, b)
+    np.testing.assert_array_equal(fast[1], slow[1])
+    np.testing.assert_allclose(fast[2], slow[2], rtol=1e-12, atol=1e-15)
 
 
 def test_a_near_receiver_whose_cut_has_no_leaf_spreads_over_clusters(
@@ -138,13 +178,14 @@ def test_a_near_receiver_whose_cut_has_no_leaf_spreads_over_clusters(
     assert (slow[1] >= mesh.receiver_count).all()  # clusters (and nodes) only
     assert np.isfinite(slow[2]).all() and (slow[2] >= 0).all() and slow[2].sum() > 0
     if compiled.get() is not None:
-        fast = subarea_spread(np.arange(count), nodes, weight, points, normals, shares)
+        fast = spread_shares(np.arange(count), nodes, weight, points, normals, shares)
+        _check_csr(fast)
         stride = mesh.receiver_count + tree.count
-        totals = [
-            np.bincount(p * stride + s, weights=w, minlength=count * stride)
-            for p, s, w in (fast, slow)
-        ]
-        np.testing.assert_allclose(totals[0], totals[1], rtol=1e-12, atol=1e-15)
+        totals = np.bincount(slow[0] * stride + slow[1], weights=slow[2], minlength=count * stride)
+        totals = totals.reshape(count, stride)
+        np.testing.assert_allclose(
+            _dense(fast, stride), totals / totals.sum(axis=1)[:, None], rtol=1e-12, atol=1e-15
+        )
 
 
 def test_clusters_spread_a_linear_radiosity_as_the_triangles_do(
