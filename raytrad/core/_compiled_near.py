@@ -41,6 +41,8 @@ KERNELS = (
     "_node_items",
     "_corner_items",
     "spread_shares",
+    "chunk_elements",
+    "spread_chunk",
     "near_triangles",
 )
 
@@ -133,18 +135,7 @@ def spread_shares(
     sub_weight,
     points,
     normals,
-    tree,
-    node_reach,
-    node_visible,
-    visible_area,
-    corner_share,
-    corners,
-    tri_corners,
-    tri_normal,
-    mean_ptr,
-    base,
-    rule,
-    rule_weight,
+    tables,
     tri_pair,
     triangles,
     tri_weight,
@@ -158,8 +149,11 @@ def spread_shares(
     ``sources`` ascending within one, ``weights``). A pair's entries are summed in the
     order the entries of a spread would come (its nodes handed on whole, then its near
     nodes' items in the order of their slots, then its triangles' corners, each in element
-    order), without the entries being written out. ``tree`` is
-    :attr:`raytrad.core.clusters.Clusters.arrays`."""
+    order), without the entries being written out. ``tables`` are
+    :meth:`raytrad.core.spread.GatherShares._tables` (the tree's arrays, its nodes' and
+    triangles' tables, the means' pointer and base, the corner rule)."""
+    tree, node_reach, node_visible, visible_area, corner_share, corners = tables[:6]
+    tri_corners, tri_normal, mean_ptr, base, rule, rule_weight = tables[6:]
     _, start, stop, left, right, node_point, _, _ = tree
     n = len(nodes)
     far = np.empty(n, dtype=np.bool_)
@@ -226,6 +220,107 @@ def spread_shares(
         done = _g._emit(touched, used, scratch, out_source, out_weight, done)
         out_pointer[p + 1] = done
     return out_pointer, out_source[:done].copy(), out_weight[:done].copy()
+
+
+def spread_chunk(
+    close,
+    weight,
+    far,
+    far_hidden,
+    root,
+    near_c,
+    near_tri,
+    near_w,
+    near_share,
+    near_hidden,
+    node_c,
+    node,
+    node_w,
+    node_hidden,
+    points,
+    normals,
+    tables,
+):
+    """A chunk's gather weights from its samples (see
+    :meth:`raytrad.core.spread.GatherShares.spread_chunk`, whose numpy path is the
+    reference): the elements of :func:`chunk_elements` spread and summed by
+    :func:`spread_shares`, then the close receivers that gather anything (chunk indices)
+    and their CSR pointer into the sources and weights."""
+    pair, sub_pair, nodes, sub_weight = chunk_elements(
+        close, weight, far, far_hidden, root, node_c, node, node_w, node_hidden
+    )
+    count = 0
+    for k in range(len(near_c)):
+        if close[near_c[k]] and not near_hidden[k]:
+            count += 1
+    tri_pair = np.empty(count, dtype=np.int64)
+    triangles = np.empty(count, dtype=np.int64)
+    tri_weight = np.empty(count)
+    tri_share = np.empty((count, 3))
+    b = 0
+    for k in range(len(near_c)):
+        if close[near_c[k]] and not near_hidden[k]:
+            tri_pair[b], triangles[b], tri_weight[b] = pair[near_c[k]], near_tri[k], near_w[k]
+            for v in range(3):
+                tri_share[b, v] = near_share[k, v]
+            b += 1
+    rows = np.flatnonzero(close)
+    pointer, sources, weights = spread_shares(
+        sub_pair,
+        nodes,
+        sub_weight,
+        points[rows],
+        normals[rows],
+        tables,
+        tri_pair,
+        triangles,
+        tri_weight,
+        tri_share,
+    )
+    kept = 0
+    for p in range(len(rows)):
+        if pointer[p + 1] > pointer[p]:  # a receiver that sees none of the patch: no row
+            rows[kept] = rows[p]
+            pointer[kept + 1] = pointer[p + 1]
+            kept += 1
+    return rows[:kept].copy(), pointer[: kept + 1].copy(), sources, weights
+
+
+def chunk_elements(close, weight, far, far_hidden, root, node_c, node, node_w, node_hidden):
+    """Each chunk receiver's pair index (its rank among the ``close`` ones) and the node
+    elements of the close receivers: their far samples that are not hidden, row by row
+    (node ``root[s]``, weight ``weight[c, s]``), then the near field's clusters taken
+    whole that are not hidden, in their order (see
+    :func:`raytrad.core.spread.numpy_chunk_elements`)."""
+    count_c, count_s = far.shape
+    pair = np.empty(count_c, dtype=np.int64)
+    pairs = 0
+    count = 0
+    for c in range(count_c):
+        pair[c] = pairs
+        if close[c]:
+            pairs += 1
+            for s in range(count_s):
+                if far[c, s] and not far_hidden[c, s]:
+                    count += 1
+    for h in range(len(node_c)):
+        if close[node_c[h]] and not node_hidden[h]:
+            count += 1
+    sub_pair = np.empty(count, dtype=np.int64)
+    nodes = np.empty(count, dtype=np.int64)
+    sub_weight = np.empty(count)
+    i = 0
+    for c in range(count_c):
+        if close[c]:
+            for s in range(count_s):
+                if far[c, s] and not far_hidden[c, s]:
+                    sub_pair[i], nodes[i], sub_weight[i] = pair[c], root[s], weight[c, s]
+                    i += 1
+    for h in range(len(node_c)):
+        if close[node_c[h]] and not node_hidden[h]:
+            sub_pair[i], nodes[i], sub_weight[i] = pair[node_c[h]], node[h], node_w[h]
+            i += 1
+    return pair, sub_pair, nodes, sub_weight
 
 
 def _node_items(element, view, tree, tables, triangle_tables, rules, work, buffers):

@@ -253,27 +253,16 @@ class PairFactors:
             np.concatenate([near_w, node_w]),
         )
         near_hidden, node_hidden = hidden[: len(near_c)], hidden[len(near_c) :]
-        pair = np.cumsum(close) - 1
-        rows = np.flatnonzero(close)
-        far_c, far_s = np.nonzero(np.take(far, rows, axis=0) & ~np.take(far_hidden, rows, axis=0))
-        far_c = rows[far_c]
-        n = close[near_c] & ~near_hidden
-        h = close[node_c] & ~node_hidden
-        pointer, sources, shares = self._shares.spread(
-            pair[np.concatenate([far_c, node_c[h]])],
-            np.concatenate([self._tree.root[far_s + sub.start], node[h]]),
-            np.concatenate([weight.reshape(-1)[far_c * weight.shape[1] + far_s], node_w[h]]),
-            pair[near_c[n]],
-            near_tri[n],
-            near_w[n],
-            np.compress(n, near_share, axis=0),
-            np.compress(close, x, axis=0),
-            np.compress(close, nx, axis=0),
+        rows, pointer, sources, shares = self._shares.spread_chunk(
+            close,
+            (weight, far, far_hidden),
+            self._tree.root[sub],
+            (near_c, near_tri, near_w, near_share, near_hidden),
+            (node_c, node, node_w, node_hidden),
+            x,
+            nx,
         )
-        near = np.flatnonzero(close)
-        gather = GatherWeights(near, factors[near], pointer, sources, shares)
-        keep = np.diff(pointer) > 0  # a near receiver that sees none of the patch gathers nothing
-        return factors, rays, gather.subset(keep)
+        return factors, rays, GatherWeights(rows, factors[rows], pointer, sources, shares)
 
     def _visibility(
         self,

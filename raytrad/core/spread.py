@@ -99,6 +99,103 @@ class GatherShares:
             (tri_pair, triangles, tri_weight, tri_share),
         )
 
+    def spread_chunk(
+        self,
+        close: np.ndarray,
+        samples: tuple[np.ndarray, ...],
+        root: np.ndarray,
+        triangle_items: tuple[np.ndarray, ...],
+        cluster_items: tuple[np.ndarray, ...],
+        points: np.ndarray,
+        normals: np.ndarray,
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """A chunk's gather weights from what its near field and visibility found: the
+        elements of :func:`numpy_chunk_elements` spread and summed
+        (:meth:`spread`), compiled in one call when available.
+
+        Parameters
+        ----------
+        close : (C,) bool
+            The chunk's receivers that gather the patch's near field.
+        samples : tuple
+            ``(weight, far, far_hidden)``, each (C, S): the far samples' disk factors,
+            which samples are far, which of those are blocked.
+        root : (S,) int64
+            The patch's sub-areas' root nodes.
+        triangle_items : tuple
+            ``(near_c, near_tri, near_w, near_share, near_hidden)`` of the near
+            triangles (:meth:`~raytrad.core.pairs.PairFactors._near_field`), with which
+            are blocked.
+        cluster_items : tuple
+            ``(node_c, node, node_w, node_hidden)`` of the clusters taken whole.
+        points, normals : (C, 3) float64
+            The chunk's receivers [m] and unit normals.
+
+        Returns
+        -------
+        rows : (G,) int64, the close receivers that gather anything (chunk indices,
+            ascending)
+        pointer : (G + 1,) int64
+        sources : (N,) int64
+        weights : (N,) float64, summing to 1 per row
+        """
+        weight, far, far_hidden = samples
+        fast = compiled.get()
+        if fast is None:
+            rows, nodes, triangles = numpy_chunk_elements(
+                close, samples, root, triangle_items, cluster_items
+            )
+            sub_pair, node, sub_weight = nodes
+            pointer, sources, weights = numpy_spread_shares(
+                sub_pair,
+                node,
+                sub_weight,
+                np.compress(close, points, axis=0),
+                np.compress(close, normals, axis=0),
+                self,
+                triangles,
+            )
+            keep = np.diff(pointer) > 0  # a receiver that sees none of the patch: no row
+            return rows[keep], np.concatenate([pointer[:1], pointer[1:][keep]]), sources, weights
+        near_c, near_tri, near_w, near_share, near_hidden = triangle_items
+        node_c, node, node_w, node_hidden = cluster_items
+        return fast.spread_chunk(
+            np.ascontiguousarray(close, dtype=np.bool_),
+            np.ascontiguousarray(weight, dtype=np.float64),
+            np.ascontiguousarray(far, dtype=np.bool_),
+            np.ascontiguousarray(far_hidden, dtype=np.bool_),
+            np.ascontiguousarray(root, dtype=np.int64),
+            near_c,
+            near_tri,
+            near_w,
+            np.ascontiguousarray(near_share, dtype=np.float64),
+            np.ascontiguousarray(near_hidden, dtype=np.bool_),
+            node_c,
+            node,
+            node_w,
+            np.ascontiguousarray(node_hidden, dtype=np.bool_),
+            np.ascontiguousarray(points, dtype=np.float64),
+            np.ascontiguousarray(normals, dtype=np.float64),
+            self._tables(),
+        )
+
+    def _tables(self) -> tuple[object, ...]:
+        """What the compiled spreads read of this object, as their ``tables`` argument."""
+        return (
+            self.tree.arrays,
+            self.node_reach,
+            self.node_visible,
+            self.visible_area,
+            self.corner_share,
+            self.corners,
+            self.tri_corners,
+            self.tri_normal,
+            self.means.pointer,
+            int(self.means.base),
+            RULE_POINTS,
+            RULE_WEIGHTS,
+        )
+
 
 def spread_shares(
     sub_pair: np.ndarray,
@@ -117,7 +214,6 @@ def spread_shares(
     fast = compiled.get()
     if fast is None:
         return numpy_spread_shares(sub_pair, nodes, sub_weight, points, normals, shares, triangles)
-    tree, means = shares.tree, shares.means
 
     def ints(a: np.ndarray) -> np.ndarray:
         return np.ascontiguousarray(a, dtype=np.int64)
@@ -132,18 +228,7 @@ def spread_shares(
         floats(sub_weight),
         floats(points),
         floats(normals),
-        tree.arrays,
-        shares.node_reach,
-        shares.node_visible,
-        shares.visible_area,
-        shares.corner_share,
-        shares.corners,
-        shares.tri_corners,
-        shares.tri_normal,
-        means.pointer,
-        int(means.base),
-        RULE_POINTS,
-        RULE_WEIGHTS,
+        shares._tables(),
         ints(tri_pair),
         ints(triangle),
         floats(tri_weight),
@@ -172,6 +257,44 @@ def numpy_spread_shares(
         np.concatenate([a, b]) for a, b in zip(nodes_part, corners_part, strict=True)
     )
     return numpy_sum_shares(pair, source, weight, len(points))
+
+
+def numpy_chunk_elements(
+    close: np.ndarray,
+    samples: tuple[np.ndarray, ...],
+    root: np.ndarray,
+    triangle_items: tuple[np.ndarray, ...],
+    cluster_items: tuple[np.ndarray, ...],
+) -> tuple[np.ndarray, tuple[np.ndarray, ...], tuple[np.ndarray, ...]]:
+    """The elements a chunk's close receivers spread (arguments as
+    :meth:`GatherShares.spread_chunk`'s).
+
+    Returns
+    -------
+    rows : (K,) int64, the close receivers (chunk indices, ascending); pair ``k`` is
+        ``rows[k]``
+    nodes : ``(sub_pair, node, sub_weight)``: each close receiver's far samples that are
+        not blocked, row by row (node ``root[s]``, weight ``weight[c, s]``), then the
+        clusters taken whole that are not blocked, in their order
+    triangles : ``(tri_pair, triangle, tri_weight, tri_share)`` of the near triangles
+        that are not blocked, in their order
+    """
+    weight, far, far_hidden = samples
+    near_c, near_tri, near_w, near_share, near_hidden = triangle_items
+    node_c, node, node_w, node_hidden = cluster_items
+    pair = np.cumsum(close) - 1
+    rows = np.flatnonzero(close)
+    far_c, far_s = np.nonzero(np.take(far, rows, axis=0) & ~np.take(far_hidden, rows, axis=0))
+    far_c = rows[far_c]
+    n = close[near_c] & ~near_hidden
+    h = close[node_c] & ~node_hidden
+    nodes = (
+        pair[np.concatenate([far_c, node_c[h]])],
+        np.concatenate([root[far_s], node[h]]),
+        np.concatenate([weight.reshape(-1)[far_c * weight.shape[1] + far_s], node_w[h]]),
+    )
+    triangles = (pair[near_c[n]], near_tri[n], near_w[n], np.compress(n, near_share, axis=0))
+    return rows, nodes, triangles
 
 
 #: An empty index array (no triangle elements).
