@@ -170,9 +170,13 @@ def verify_outputs(directory: str | os.PathLike[str], finished: bool = False) ->
             "solution so far; resume it to finish"
         )
     elif finished and (early := _early_stop(manifest)):
+        solve_stop = manifest.get("stop_reason") in EARLY_STOPS
+        what = "stopped before its tolerance" if solve_stop else "had its refinement cut short"
         problems.append(
-            f"{path}: the run stopped before its tolerance ({early}): its outputs are the "
-            "best answer it had; render again with --resume to finish"
+            f"{path}: the run {what} ({early}): its outputs are the best answer it had; "
+            "render again with --resume, without --time-limit or with a larger one, to "
+            "finish (a resumed run gets the same seconds again and refines from its "
+            "first round)"
         )
     for name, entry in sorted(files.items()):
         file = directory / name

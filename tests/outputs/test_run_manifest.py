@@ -129,4 +129,5 @@ def test_finished_fails_a_set_that_keeps_a_checkpoint(
     (tmp_path / MANIFEST).write_text(json.dumps(manifest))
     assert verify_outputs(tmp_path) == []
     (problem,) = verify_outputs(tmp_path, finished=True)
-    assert "(a checkpoint kept to resume)" in problem
+    assert "had its refinement cut short (a checkpoint kept to resume)" in problem
+    assert "without --time-limit" in problem
