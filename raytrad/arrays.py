@@ -6,6 +6,13 @@
 measured with numpy 2.4 on 2 cores, 3 million indices below 500 000 took 1.22 s against
 0.23 s, and a million 64-bit keys 0.84 s against 0.05 s (2026-12-03). Imprinting 100
 contact outlines spent 23 s of 44 there.
+
+:func:`corner_mean`, :func:`corner_min`, :func:`corner_max` and :func:`longest_side`
+reduce a triangle's three corners as ``mean``, ``min``, ``max`` and ``np.linalg.norm``
+over the corner axis do, to the bit, by adding or comparing the three rows: numpy's
+reductions over a short middle axis take two to four times as long (100 000 triangles:
+a mean in 6.1 ms against 10.9 with the gather, a minimum in 1.9 ms against 7.4), and
+refinement makes them for the whole mesh every round.
 """
 
 from __future__ import annotations
@@ -79,3 +86,28 @@ def spatially_ordered(points: np.ndarray, indices: np.ndarray) -> tuple[np.ndarr
     rank = np.empty_like(order)
     rank[order] = np.arange(len(order))
     return points[order], rank[indices]
+
+
+def corner_mean(corners: np.ndarray) -> np.ndarray:
+    """(N, D) ``corners.mean(axis=1)`` of (N, 3, D) corners, to the bit (the rows added in
+    order, then divided by 3)."""
+    return (corners[:, 0] + corners[:, 1] + corners[:, 2]) / 3.0
+
+
+def corner_min(corners: np.ndarray) -> np.ndarray:
+    """(N, D) ``corners.min(axis=1)`` of (N, 3, D) corners (no NaN)."""
+    return np.minimum(np.minimum(corners[:, 0], corners[:, 1]), corners[:, 2])
+
+
+def corner_max(corners: np.ndarray) -> np.ndarray:
+    """(N, D) ``corners.max(axis=1)`` of (N, 3, D) corners (no NaN)."""
+    return np.maximum(np.maximum(corners[:, 0], corners[:, 1]), corners[:, 2])
+
+
+def longest_side(corners: np.ndarray) -> np.ndarray:
+    """(N,) each triangle's longest side [m] from (N, 3, 3) corners, to the bit
+    ``np.linalg.norm(corners - np.roll(corners, 1, axis=1), axis=2).max(axis=1)``."""
+    side = corners - corners[:, [2, 0, 1]]
+    squared = side[..., 0] * side[..., 0] + side[..., 1] * side[..., 1]
+    length = np.sqrt(squared + side[..., 2] * side[..., 2])
+    return np.maximum(np.maximum(length[:, 0], length[:, 1]), length[:, 2])

@@ -1,12 +1,20 @@
-"""raytrad.arrays: the sort-based unique against numpy's own; Morton order against a
-bit-by-bit reference."""
+"""raytrad.arrays: the sort-based unique and the corner reductions against numpy's own;
+Morton order against a bit-by-bit reference."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from raytrad.arrays import morton_order, spatially_ordered, unique
+from raytrad.arrays import (
+    corner_max,
+    corner_mean,
+    corner_min,
+    longest_side,
+    morton_order,
+    spatially_ordered,
+    unique,
+)
 
 
 @pytest.mark.parametrize(
@@ -77,3 +85,19 @@ def test_spatially_ordered_keeps_every_triangle() -> None:
     new_points, new_triangles = spatially_ordered(points, triangles)
     np.testing.assert_array_equal(new_points[new_triangles], points[triangles])
     np.testing.assert_array_equal(new_points, points[morton_order(points)])
+
+
+@pytest.mark.parametrize("scale", [1e-3, 1.0, 1e4])
+def test_corner_reductions_are_numpys_to_the_bit(scale: float) -> None:
+    """Triangles of random corners, far from the origin and near it, with repeated
+    corners (degenerate): the three-row reductions equal numpy's over the corner axis."""
+    rng = np.random.default_rng(int(scale * 1000) % 97)
+    corners = (rng.random((5000, 3, 3)) - 0.5) * scale + rng.random((5000, 1, 1)) * 100 * scale
+    corners[:50, 1] = corners[:50, 0]  # two corners alike: a zero side
+    np.testing.assert_array_equal(corner_mean(corners), corners.mean(axis=1))
+    np.testing.assert_array_equal(corner_min(corners), corners.min(axis=1))
+    np.testing.assert_array_equal(corner_max(corners), corners.max(axis=1))
+    reference = np.linalg.norm(corners - np.roll(corners, 1, axis=1), axis=2).max(axis=1)
+    np.testing.assert_array_equal(longest_side(corners), reference)
+    right = np.array([[[0.0, 0.0, 0.0], [3.0, 0.0, 0.0], [0.0, 4.0, 0.0]]])
+    assert longest_side(right)[0] == 5.0

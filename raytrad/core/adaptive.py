@@ -27,6 +27,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from raytrad.arrays import longest_side
 from raytrad.constants import tol
 from raytrad.core.columns import return_freed_memory
 from raytrad.core.formfactor import ROW_FIX_LIMIT, FormFactorEngine
@@ -311,8 +312,7 @@ def _to_split(
     if found is not None and len(found) == len(luminance):
         wrong = found[mesh.triangle_receivers].max(axis=1) / FOUND_SHARE
         spread = np.maximum(spread, np.where(corner_seen.all(axis=1), wrong, 0.0))
-    corners = mesh.positions[mesh.triangles]
-    longest = np.linalg.norm(corners - np.roll(corners, 1, axis=1), axis=2).max(axis=1)
+    longest = longest_side(mesh.positions[mesh.triangles])
     candidate = (spread > settings.threshold) & (longest > smallest)
     # worst first by area x relative spread x absolute spread (in units of the scene's
     # mean luminance): a triangle at a tenth of the mean needs about three times the

@@ -32,6 +32,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from raytrad.arrays import corner_max, corner_mean, corner_min
 from raytrad.core.kernels import disk_form_factor
 from raytrad.core.mesh import RadiosityMesh
 from raytrad.core.refine import longest_edge
@@ -130,7 +131,7 @@ def build_clusters(mesh: RadiosityMesh, sub_tri: np.ndarray, sub_ptr: np.ndarray
     Clusters
     """
     sub_tri = np.array(sub_tri, dtype=np.int64)
-    centroid = mesh.positions[mesh.triangles].mean(axis=1)
+    centroid = corner_mean(mesh.positions[mesh.triangles])
     count = len(sub_ptr) - 1
     starts, stops, owners = [sub_ptr[:-1].astype(np.int64)], [sub_ptr[1:].astype(np.int64)], []
     owners.append(np.arange(count))
@@ -239,11 +240,11 @@ def _geometry(
     offsets = start[leaf]
     corners = mesh.positions[mesh.triangles[sub_tri]]
     lo, hi = np.empty((len(start), 3)), np.empty((len(start), 3))
-    lo[leaf] = np.minimum.reduceat(corners.min(axis=1), offsets)
-    hi[leaf] = np.maximum.reduceat(corners.max(axis=1), offsets)
+    lo[leaf] = np.minimum.reduceat(corner_min(corners), offsets)
+    hi[leaf] = np.maximum.reduceat(corner_max(corners), offsets)
     owner = np.repeat(np.arange(len(leaf)), stop[leaf] - start[leaf])
     distance = np.linalg.norm(centroid[sub_tri] - middle[leaf][owner], axis=1)
-    nearest = np.lexsort((np.arange(len(sub_tri)), distance, owner))[offsets]
+    nearest = _first_nearest(distance, owner, offsets)
     point = np.empty((len(start), 3))
     chosen = np.empty(len(start), np.int64)
     chosen[leaf] = sub_tri[nearest]
@@ -263,6 +264,16 @@ def _geometry(
         chosen[inner] = chosen[pick]
         point[inner] = point[pick]
     return point, mesh.triangle_normal[chosen], area, np.linalg.norm(hi - lo, axis=1)
+
+
+def _first_nearest(distance: np.ndarray, owner: np.ndarray, offsets: np.ndarray) -> np.ndarray:
+    """For runs of slots (``owner`` (N,) ascending, each run non-empty and starting at
+    ``offsets``), the slot of each run's smallest ``distance``, the first on ties: what
+    ``np.lexsort((np.arange(N), distance, owner))[offsets]`` gives, without sorting."""
+    hit = np.flatnonzero(distance == np.minimum.reduceat(distance, offsets)[owner])
+    first = np.ones(len(hit), dtype=bool)
+    first[1:] = owner[hit[1:]] != owner[hit[:-1]]
+    return hit[first]
 
 
 def numpy_cuts(

@@ -20,7 +20,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from raytrad.arrays import spatially_ordered, unique
+from raytrad.arrays import corner_mean, longest_side, spatially_ordered, unique
 from raytrad.constants import scene_diagonal, scene_extent, tol
 from raytrad.core.imprint import Outlines, imprint_outlines, outline_segments
 from raytrad.core.intersections import intersection_segments
@@ -340,7 +340,7 @@ def _check_refinement_budget(scene: Scene, corners: np.ndarray, limit: np.ndarra
     bound = refined_count_bound(corners, limit)
     if bound <= MAX_REFINED_TRIANGLES:
         return
-    lengths = np.linalg.norm(corners - np.roll(corners, 1, axis=1), axis=2).max(axis=1)
+    lengths = longest_side(corners)
     worst = int(np.argmax(lengths / limit))
     raise SceneError(
         scene.source,
@@ -432,7 +432,7 @@ def surface_receivers(
     third = np.repeat(area / 3.0, 3)
     r_area = np.bincount(inverse, weights=third, minlength=count)
     r_normal = np.zeros((count, 3))
-    centroid = np.repeat(positions[triangles].mean(axis=1), 3, axis=0)
+    centroid = np.repeat(corner_mean(positions[triangles]), 3, axis=0)
     tri_normal = np.repeat(normal, 3, axis=0)
     for k in range(3):
         r_normal[:, k] = np.bincount(inverse, weights=tri_normal[:, k] * third, minlength=count)
@@ -448,8 +448,11 @@ def surface_receivers(
     far = float(np.abs(positions).max(initial=0.0))
     slack = tol.tie + 16.0 * np.finfo(np.float64).eps * far / edge
     near_largest = third >= largest[inverse] * (1.0 - slack)
-    order = np.lexsort((~near_largest, inverse))
-    first = order[np.searchsorted(inverse[order], np.arange(count))]
+    # each receiver's first corner among its near-largest ones (its largest corner is
+    # one), as a stable sort by (receiver, not near-largest) would put first
+    big = np.flatnonzero(near_largest)
+    first = np.full(count, len(inverse), dtype=np.int64)
+    np.minimum.at(first, inverse[big], big)
     r_inward = centroid[first]
     r_normal /= np.linalg.norm(r_normal, axis=1)[:, None]
     return inverse.reshape(-1, 3), positions[distinct // stride], r_normal, r_area, r_inward

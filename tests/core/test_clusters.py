@@ -188,3 +188,18 @@ def test_trees_do_not_depend_on_where_the_scene_sits() -> None:
     assert trees[0].count > 100
     for name in ("sub_tri", "left", "right", "start"):
         np.testing.assert_array_equal(getattr(trees[0], name), getattr(trees[1], name))
+
+
+def test_first_nearest_is_the_sorts_first() -> None:
+    """Each run's nearest slot, the first on ties (distances from a handful of values),
+    as a stable sort by (run, distance) puts first."""
+    from raytrad.core.clusters import _first_nearest
+
+    rng = np.random.default_rng(4)
+    for _ in range(100):
+        counts = rng.integers(1, 20, rng.integers(1, 40))
+        owner = np.repeat(np.arange(len(counts)), counts)
+        offsets = np.concatenate([[0], np.cumsum(counts)[:-1]])
+        distance = rng.integers(0, 4, len(owner)) * 0.5
+        expected = np.lexsort((np.arange(len(owner)), distance, owner))[offsets]
+        np.testing.assert_array_equal(_first_nearest(distance, owner, offsets), expected)
