@@ -27,7 +27,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from raytrad.arrays import longest_side
+from raytrad.arrays import corner_max, corner_mean, corner_min, longest_side
 from raytrad.constants import tol
 from raytrad.core.columns import return_freed_memory
 from raytrad.core.formfactor import ROW_FIX_LIMIT, FormFactorEngine
@@ -197,12 +197,13 @@ def refine_adaptively(
                 log.warning("refinement skipped: time limit spent or interrupted")
             break
         room = budget - out.mesh.receiver_count
-        order = _to_split(out.mesh, out.radiosity, settings, smallest, room, found)
+        longest = longest_side(out.mesh.positions[out.mesh.triangles])
+        order = _to_split(out.mesh, out.radiosity, settings, smallest, room, found, longest)
         refined, parent = out.mesh, np.zeros(0, dtype=np.int64)
         while len(order):  # the closure splits neighbours too: never beyond the budget
             split = np.zeros(len(out.mesh.triangles), dtype=bool)
             split[order] = True
-            refined, parent = subdivide(out.mesh, split)
+            refined, parent = subdivide(out.mesh, split, longest)
             if refined.receiver_count <= budget:
                 break
             order = order[: len(order) // 2]
@@ -286,6 +287,7 @@ def _to_split(
     smallest: float,
     room: int,
     found: np.ndarray | None = None,
+    longest: np.ndarray | None = None,
 ) -> np.ndarray:
     """The triangles to split this round, about ``room`` receivers' worth: those whose
     corners spread by more than the threshold, or with a corner whose last gather
@@ -294,7 +296,8 @@ def _to_split(
     line come first, then the others by area x relative spread x absolute spread (in
     units of the scene's mean luminance): between ranking by the relative error (each
     surface's mean counts, however dark) and by the absolute one (the bake's
-    area-weighted RMS)."""
+    area-weighted RMS). ``longest``: (T,) each triangle's longest side [m]
+    (:func:`~raytrad.arrays.longest_side`, computed when not given)."""
     luminance = radiosity @ _LUMINANCE
     visible = mesh.receiver_area > 0
     if room <= 0 or not visible.any():
@@ -304,7 +307,8 @@ def _to_split(
         return np.zeros(0, dtype=np.int64)
     corner = luminance[mesh.triangle_receivers]
     corner_seen = visible[mesh.triangle_receivers]
-    spread = np.ptp(corner, axis=1) / np.maximum(corner.mean(axis=1), settings.floor * level)
+    mean = corner_mean(corner)
+    spread = (corner_max(corner) - corner_min(corner)) / np.maximum(mean, settings.floor * level)
     # a triangle with hidden and visible corners straddles a contact line (a block's
     # base on the floor): what it shows there is a guess, so it is always refined
     straddles = corner_seen.any(axis=1) & ~corner_seen.all(axis=1)
@@ -312,12 +316,13 @@ def _to_split(
     if found is not None and len(found) == len(luminance):
         wrong = found[mesh.triangle_receivers].max(axis=1) / FOUND_SHARE
         spread = np.maximum(spread, np.where(corner_seen.all(axis=1), wrong, 0.0))
-    longest = longest_side(mesh.positions[mesh.triangles])
+    if longest is None:
+        longest = longest_side(mesh.positions[mesh.triangles])
     candidate = (spread > settings.threshold) & (longest > smallest)
     # worst first by area x relative spread x absolute spread (in units of the scene's
     # mean luminance): a triangle at a tenth of the mean needs about three times the
     # relative spread of one at the mean to come first
-    scale = np.maximum(corner.mean(axis=1), settings.floor * level) / level
+    scale = np.maximum(mean, settings.floor * level) / level
     key = np.where(np.isinf(spread), np.inf, spread**2 * scale * mesh.triangle_area)
     order = np.argsort(-np.where(candidate, key, -np.inf), kind="stable")
     # each split adds about one receiver per triangle (a midpoint shared by two)
@@ -344,8 +349,11 @@ def _found(
     return np.asarray(np.abs(got - before @ _LUMINANCE) / np.maximum(got, floor))
 
 
-def subdivide(mesh: RadiosityMesh, split: np.ndarray) -> tuple[RadiosityMesh, np.ndarray]:
-    """The mesh with the ``split`` ((T,) bool) triangles bisected, conformingly.
+def subdivide(
+    mesh: RadiosityMesh, split: np.ndarray, longest: np.ndarray | None = None
+) -> tuple[RadiosityMesh, np.ndarray]:
+    """The mesh with the ``split`` ((T,) bool) triangles bisected, conformingly
+    (``longest``: (T,) each triangle's longest side [m], computed when not given).
 
     Receivers keep their index (new ones are appended); patches and sub-areas are
     unchanged, new triangles inherit their parent's patch, sub-area, source triangle and
@@ -359,8 +367,8 @@ def subdivide(mesh: RadiosityMesh, split: np.ndarray) -> tuple[RadiosityMesh, np
     """
     if mesh.triangle_surface is None:
         raise ValueError("adaptive refinement needs the mesh's triangle surfaces")
-    corners = mesh.positions[mesh.triangles]
-    longest = np.linalg.norm(corners - np.roll(corners, 1, axis=1), axis=2).max(axis=1)
+    if longest is None:
+        longest = longest_side(mesh.positions[mesh.triangles])
     limit = np.where(split, 0.75 * longest, np.inf)
     positions, triangles, parent = refine(
         mesh.positions, mesh.triangles, limit, max_rounds=1, quiet=True
