@@ -275,9 +275,12 @@ def render(
                     save(result.state, whole=prepared.engine.complete)
             prepared.engine.release_columns()  # refinement and the outputs need none
             check_output_range(result.radiosity, scene_path)
-            solved = prepared
+            solved, solution = prepared, result.radiosity
+            rounds = resuming.kept_refinement(checkpoint, key, solution) if state else None
             with timed(timings, "refine"):
-                baked, result, refinement = refine(prepared, result, settings, budget)
+                baked, result, refinement = pipeline.refine_solution(
+                    prepared, result, settings.refine, budget, rounds
+                )
             with timed(timings, "error"):
                 error = estimate_error(solved, baked, result, error_log, budget())
             with timed(timings, "write"):
@@ -286,10 +289,8 @@ def render(
                 if plot:
                     outputs["plot"] = output_dir / "convergence.png"
                     plot_convergence(outputs["plot"], {result.method: error_log}, str(scene_path))
-            if saved and (result.stop_reason in RESUMABLE or refinement.stopped):
-                outputs["checkpoint"] = checkpoint
-            elif checkpoint.exists():
-                checkpoint.unlink()
+            keep = saved and (result.stop_reason in RESUMABLE or refinement.stopped)
+            outputs |= resuming.keep_checkpoint(checkpoint, keep, refinement, key, solution)
             report = build_report(scene_path, baked, result, settings, timings, outputs)
             report |= {"outputs_detail": facts, "resumed": taken}
             add_error_log(report, error_log, ref)

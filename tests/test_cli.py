@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
 import json
 import logging
@@ -15,6 +16,7 @@ import pytest
 
 from raytrad import api
 from raytrad.cli import _print_summary
+from raytrad.core.adaptive import RefineSettings
 from raytrad.core.mesh import MeshSettings
 from raytrad.core.pipeline import error_samples
 from raytrad.core.solver import SHOOTING_METHODS, SolveSettings
@@ -364,6 +366,55 @@ def test_a_time_limited_refinement_resumes_without_pass_or_solve(
     _, _, want = read_radiosity_ply(tmp_path / "straight" / "cornell-box.ply")
     _, _, got = read_radiosity_ply(out / "cornell-box.ply")
     np.testing.assert_array_equal(got, want)
+
+
+def test_a_cut_refinement_resumes_from_its_last_round(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Refinement cut short keeps its finished rounds beside the checkpoint: each resume
+    goes on from them (one more round under the same limit, where it used to make the
+    same rounds again), and the last gives the uninterrupted bake, leaving no file."""
+    from raytrad.core import adaptive
+
+    scene = SCENES / "cornell-box.obj"
+    settings = RenderSettings(
+        mesh=MeshSettings(receivers=800, patches=60), solve=SolveSettings(time_limit=1000.0)
+    )
+    straight = api.render(scene, tmp_path / "straight", settings)
+    assert straight.refinement.rounds >= 3
+    gathers = [0]
+    original = adaptive._gather
+
+    def gather(*args: object, **kwargs: object) -> object:
+        gathers[0] += 1
+        return original(*args, **kwargs)
+
+    monkeypatch.setattr(adaptive, "_gather", gather)
+    out = tmp_path / "cut"
+    kept = out / "cornell-box.refinement.npz"
+    rounds = []
+    for resume in (False, True):  # the budget is spent in each run's second gather
+        gathers[0] = 0
+        cut = api.render(scene, out, settings, resume=resume, stop=lambda: gathers[0] >= 2)
+        assert cut.refinement.stopped and cut.outputs["refinement"] == kept and kept.is_file()
+        rounds.append(cut.refinement.rounds)
+    assert rounds == [1, 2]  # the resume went on from round 1
+    # rounds made under other refinement settings are not gone on from
+    other = dataclasses.replace(settings, refine=RefineSettings(threshold=0.2))
+    gathers[0] = 0
+    cut = api.render(scene, out, other, resume=True, stop=lambda: gathers[0] >= 2)
+    assert cut.refinement.rounds == 1
+    last = api.render(scene, out, settings, resume=True)
+    assert not last.refinement.stopped and last.refinement.rounds == straight.refinement.rounds
+    assert last.refinement.rays == straight.refinement.rays
+    assert not kept.exists() and not (out / "cornell-box.checkpoint.npz").exists()
+    _, _, want = read_radiosity_ply(tmp_path / "straight" / "cornell-box.ply")
+    _, _, got = read_radiosity_ply(out / "cornell-box.ply")
+    np.testing.assert_array_equal(got, want)
+    assert (
+        last.report["refinement"]["receivers_added"]
+        == straight.report["refinement"]["receivers_added"]
+    )
 
 
 def test_a_stop_in_the_form_factor_pass_saves_and_resumes(tmp_path: Path) -> None:

@@ -126,6 +126,15 @@ class Refinement:
     stopped : bool
         The time limit or an interrupt stopped it before its last round: the mesh is
         coarser than an uninterrupted run's.
+    resumable : Refinement or None
+        When ``stopped``: the refinement as its last complete round left it, which
+        :func:`refine_adaptively` goes on from (``start``) to the uninterrupted result.
+    found, changes
+        What a round carries to the next (each receiver's last gather against its
+        interpolation, see :data:`FOUND_SHARE`; each round's changes and the new
+        receivers' areas, for ``change_rms``).
+    settings : RefineSettings or None
+        The settings the rounds were made with (a resume goes on only under the same).
     """
 
     mesh: RadiosityMesh
@@ -138,6 +147,10 @@ class Refinement:
     rays: int = 0
     rays_naive: int = 0
     stopped: bool = False
+    resumable: Refinement | None = field(default=None, repr=False)
+    found: np.ndarray | None = field(default=None, repr=False)
+    changes: list[tuple[np.ndarray, np.ndarray]] = field(default_factory=list, repr=False)
+    settings: RefineSettings | None = field(default=None, repr=False)
 
 
 def refine_adaptively(
@@ -148,6 +161,7 @@ def refine_adaptively(
     radiosity: np.ndarray,
     settings: RefineSettings,
     stop: Callable[[], bool] | None = None,
+    start: Refinement | None = None,
 ) -> Refinement:
     """Refine ``mesh`` where ``radiosity`` changes fast and gather the new receivers.
 
@@ -166,10 +180,18 @@ def refine_adaptively(
     stop : callable or None
         Polled before each round and after each patch of a round's gather (a time budget
         spent, Ctrl-C): True ends refinement there (a round cut short keeps its receivers
-        at the interpolation of the mesh before it).
+        at the interpolation of the mesh before it; ``resumable`` the rounds before).
+    start : Refinement or None
+        The ``resumable`` part of an earlier refinement of the same solve (``mesh`` and
+        ``radiosity``), to go on from: its rounds are not made again, and the result is
+        the uninterrupted refinement's.
     """
     budget = settings.max_receivers or 2 * mesh.receiver_count
-    out = Refinement(mesh, np.asarray(radiosity, dtype=np.float64))
+    out = Refinement(mesh, np.asarray(radiosity, dtype=np.float64), settings=settings)
+    if start is not None and start.settings != settings:
+        log.warning("the refinement rounds kept were made with other settings: starting again")
+    elif start is not None:
+        out = replace(start, stopped=False, interpolated=0, resumable=None)
     if settings.threshold <= 0:
         return out
     if budget <= mesh.receiver_count:
@@ -182,11 +204,14 @@ def refine_adaptively(
         return out
     patch_radiosity = patch_means(mesh, radiosity)
     smallest = settings.smallest * engine.diagonal
-    changes: list[tuple[np.ndarray, np.ndarray]] = []
-    found = np.zeros(mesh.receiver_count)  # see FOUND_SHARE: nothing found before round 1
-    for _ in range(settings.rounds):
+    changes = list(out.changes)
+    # see FOUND_SHARE: nothing found before round 1
+    found = np.zeros(mesh.receiver_count) if out.found is None else out.found
+    for _ in range(settings.rounds - out.rounds):
+        done = replace(out, found=found, changes=list(changes))  # what a resume goes on from
         if stop is not None and stop():
             out.stopped = True
+            out.resumable = done
             if out.rounds:
                 log.warning(
                     "refinement stopped after %d rounds (time limit spent or interrupted): "
@@ -231,6 +256,7 @@ def refine_adaptively(
         return_freed_memory()
         if gathered is None:  # stopped within the round: the last mesh's look, kept
             _keep_interpolated(out, refined, before, new)
+            out.resumable = done
             break
         changes.append((before - gathered, refined.receiver_area[new]))
         found = np.concatenate([found, _found(level, before, gathered, settings)])

@@ -383,8 +383,10 @@ def refine_solution(
     result: SolveResult,
     settings: RefineSettings,
     stop: Callable[[], bool] | None = None,
+    start: Refinement | None = None,
 ) -> tuple[Prepared, SolveResult, Refinement]:
-    """Adaptive refinement of a solve (:mod:`raytrad.core.adaptive`).
+    """Adaptive refinement of a solve (:mod:`raytrad.core.adaptive`), going on from
+    ``start`` (the rounds an earlier, stopped refinement of this solve made) if given.
 
     Returns
     -------
@@ -403,6 +405,7 @@ def refine_solution(
         result.radiosity,
         settings,
         stop,
+        start,
     )
     if not refinement.added:
         return prepared, result, refinement

@@ -9,6 +9,8 @@ else is refused with one line saying what changed.
 
 from __future__ import annotations
 
+import dataclasses
+import hashlib
 import logging
 import os
 from collections.abc import Iterable
@@ -17,7 +19,9 @@ from typing import Any
 
 import numpy as np
 
+from raytrad.core.adaptive import Refinement, RefineSettings
 from raytrad.core.convergence import ErrorLog
+from raytrad.core.mesh import RadiosityMesh
 from raytrad.core.solver import SolverState
 from raytrad.errors import RaytradError
 from raytrad.formats.checkpoint import Spool, read_checkpoint, write_checkpoint
@@ -30,6 +34,8 @@ LAYOUT = 5  # 4: gather sources beyond the receivers are cluster-tree nodes; 5: 
 # numbered in Morton order (a column of layout 4 indexes another numbering)
 #: Prefix of the arrays holding the columns of a form-factor pass cut short.
 PASS = "pass_"
+#: Prefix of the arrays holding a refinement's mesh (:func:`save_refinement`).
+MESH = "mesh_"
 
 
 def fingerprint(scene: Scene, system_settings: dict[str, Any]) -> dict[str, Any]:
@@ -247,6 +253,115 @@ def _flat(settings: dict[str, Any], prefix: str = "") -> dict[str, Any]:
 def checkpoint_path(output_dir: Path, stem: str) -> Path:
     """Where a run's checkpoint lives: ``<output_dir>/<stem>.checkpoint.npz``."""
     return output_dir / f"{stem}.checkpoint.npz"
+
+
+def refinement_path(checkpoint: Path) -> Path:
+    """Where a run keeps the rounds of a refinement cut short, beside its ``checkpoint``
+    (:func:`checkpoint_path`): ``<output_dir>/<stem>.refinement.npz``."""
+    return checkpoint.with_name(checkpoint.name.replace(".checkpoint.npz", ".refinement.npz"))
+
+
+def save_refinement(
+    path: str | os.PathLike[str], refinement: Refinement, key: dict[str, Any], solve: str
+) -> None:
+    """Write the rounds of a refinement cut short (its ``resumable`` part: the refined mesh,
+    its radiosity and what the next round reads) to ``path`` atomically, with the
+    checkpoint's fingerprint ``key`` and the ``solve`` it refined (:func:`solve_digest`)."""
+    done = refinement.resumable
+    if done is None:
+        raise ValueError("the refinement was not cut short")
+    arrays: dict[str, Any] = {
+        MESH + f.name: getattr(done.mesh, f.name)
+        for f in dataclasses.fields(done.mesh)
+        if getattr(done.mesh, f.name) is not None
+    }
+    arrays |= {"radiosity": done.radiosity, "found": done.found}
+    for k, (change, area) in enumerate(done.changes):
+        arrays |= {f"change_{k}": change, f"change_area_{k}": area}
+    counts = {"added": done.added, "rounds": done.rounds}
+    counts |= {"rays": done.rays, "rays_naive": done.rays_naive}
+    record = {"fingerprint": key, "solve": solve, "counts": counts}
+    if done.settings is not None:
+        record["refine"] = dataclasses.asdict(done.settings)
+    write_checkpoint(path, arrays, record | {"changes": len(done.changes)})
+
+
+def load_refinement(
+    path: str | os.PathLike[str], key: dict[str, Any], solve: str
+) -> Refinement | None:
+    """The rounds :func:`save_refinement` kept in ``path``, when they refined this
+    ``solve`` of this system (``key``); None otherwise (no file: a warning when it is
+    unreadable or of another solve, and the refinement starts from its first round)."""
+    if not Path(path).exists():
+        return None
+    try:
+        arrays, record = read_checkpoint(path)
+        if record.get("fingerprint") != key or record.get("solve") != solve:
+            log.warning("%s: made for another solve; refinement starts again", path)
+            return None
+        fields = {
+            name[len(MESH) :]: np.asarray(values)
+            for name, values in arrays.items()
+            if name.startswith(MESH)
+        }
+        mesh = RadiosityMesh(**fields)
+        changes = [
+            (np.asarray(arrays[f"change_{k}"]), np.asarray(arrays[f"change_area_{k}"]))
+            for k in range(int(record["changes"]))
+        ]
+        counts = {name: int(value) for name, value in record["counts"].items()}
+        found = np.asarray(arrays["found"])
+        radiosity = np.asarray(arrays["radiosity"])
+        settings = RefineSettings(**record["refine"]) if "refine" in record else None
+    except (RaytradError, KeyError, TypeError, ValueError) as exc:
+        log.warning("%s: cannot read the refinement kept (%s); it starts again", path, exc)
+        return None
+    log.info("resuming refinement from %s after round %d", path, counts["rounds"])
+    return Refinement(
+        mesh,
+        radiosity,
+        added=counts["added"],
+        rounds=counts["rounds"],
+        rays=counts["rays"],
+        rays_naive=counts["rays_naive"],
+        found=found,
+        changes=changes,
+        settings=settings,
+    )
+
+
+def kept_refinement(checkpoint: Path, key: dict[str, Any], solve: np.ndarray) -> Refinement | None:
+    """The rounds a run kept beside ``checkpoint`` of its refinement cut short
+    (:func:`load_refinement`), when they refined the ``solve`` radiosity."""
+    return load_refinement(refinement_path(checkpoint), key, solve_digest(solve))
+
+
+def keep_checkpoint(
+    checkpoint: Path,
+    keep: bool,
+    refinement: Refinement,
+    key: dict[str, Any],
+    solve: np.ndarray,
+) -> dict[str, Path]:
+    """The files a run leaves to resume from, by output name: with ``keep``, its
+    ``checkpoint`` and, when ``refinement`` was cut short after a round, that round's
+    mesh beside it (:func:`save_refinement`); without, none, and both are removed."""
+    rounds = refinement_path(checkpoint)
+    done = refinement.resumable
+    kept = {"checkpoint": checkpoint} if keep else {}
+    if keep and done is not None and done.rounds > 0:
+        save_refinement(rounds, refinement, key, solve_digest(solve))
+        return kept | {"refinement": rounds}
+    if not keep:
+        checkpoint.unlink(missing_ok=True)
+    rounds.unlink(missing_ok=True)
+    return kept
+
+
+def solve_digest(radiosity: np.ndarray) -> str:
+    """A SHA-256 of a solve's receiver radiosity: a refinement kept resumes only on the
+    same solve (a resumed solve that converged gives it to the bit)."""
+    return hashlib.sha256(np.ascontiguousarray(radiosity, dtype=np.float64).tobytes()).hexdigest()
 
 
 def resume_facts(

@@ -174,9 +174,9 @@ def verify_outputs(directory: str | os.PathLike[str], finished: bool = False) ->
         what = "stopped before its tolerance" if solve_stop else "had its refinement cut short"
         problems.append(
             f"{path}: the run {what} ({early}): its outputs are the best answer it had; "
-            "render again with --resume, without --time-limit or with a larger one, to "
-            "finish (a resumed run gets the same seconds again and refines from its "
-            "first round)"
+            "render again with --resume to go on (each resumed run gets its --time-limit "
+            "again, and goes on from the refinement rounds kept; without a limit it "
+            "finishes)"
         )
     for name, entry in sorted(files.items()):
         file = directory / name

@@ -13,7 +13,14 @@ import pytest
 from raytrad import api
 from raytrad.core.solver import SolverState
 from raytrad.errors import RaytradError
-from raytrad.outputs.resume import difference, fingerprint, load_state, save_state
+from raytrad.outputs.resume import (
+    difference,
+    fingerprint,
+    load_refinement,
+    load_state,
+    save_refinement,
+    save_state,
+)
 from raytrad.scene.builtin import cornell_box, furnace_box
 from raytrad.scenefiles import write_obj
 from raytrad.settings import MeshSettings, RenderSettings
@@ -247,3 +254,49 @@ def test_the_error_log_round_trips_with_the_state(tmp_path: Path) -> None:
     save_state(path, _state(1), key, history=broken)
     state, _, back = resume_point(path, key)
     assert state is not None and back is None
+
+
+def test_the_rounds_of_a_cut_refinement_round_trip(
+    tmp_path: Path, caplog: pytest.LogCaptureFixture
+) -> None:
+    """The mesh, radiosity and what the next round reads come back to the bit, for the
+    same system and solve only (another solve's rounds are passed over with a warning)."""
+    from raytrad.core.adaptive import Refinement, RefineSettings
+    from raytrad.core.mesh import build_mesh
+
+    mesh = build_mesh(cornell_box(), SETTINGS.mesh)
+    rng = np.random.default_rng(2)
+    changes = [(rng.random((5, 3)), rng.random(5)), (rng.random((2, 3)), rng.random(2))]
+    done = Refinement(
+        mesh,
+        rng.random((mesh.receiver_count, 3)),
+        settings=RefineSettings(threshold=0.05, rounds=4),
+        added=7,
+        rounds=2,
+        rays=123,
+        rays_naive=456,
+        found=rng.random(mesh.receiver_count),
+        changes=changes,
+    )
+    path = tmp_path / "scene.refinement.npz"
+    key = fingerprint(cornell_box(), SETTINGS.system_settings())
+    save_refinement(path, Refinement(mesh, done.radiosity, resumable=done), key, "solve-a")
+    back = load_refinement(path, key, "solve-a")
+    assert back is not None
+    assert (back.added, back.rounds, back.rays, back.rays_naive) == (7, 2, 123, 456)
+    assert back.settings == done.settings
+    np.testing.assert_array_equal(back.radiosity, done.radiosity)
+    np.testing.assert_array_equal(back.found, done.found)
+    for (a, b), (c, d) in zip(back.changes, changes, strict=True):
+        np.testing.assert_array_equal(a, c)
+        np.testing.assert_array_equal(b, d)
+    for name, value in vars(mesh).items():
+        if value is None:
+            assert getattr(back.mesh, name) is None
+        else:
+            np.testing.assert_array_equal(getattr(back.mesh, name), value)
+            assert getattr(back.mesh, name).dtype == value.dtype
+    assert load_refinement(path, key, "solve-b") is None
+    assert "made for another solve" in caplog.text
+    path.write_bytes(b"not a checkpoint")
+    assert load_refinement(path, key, "solve-a") is None

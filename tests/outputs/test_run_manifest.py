@@ -130,4 +130,4 @@ def test_finished_fails_a_set_that_keeps_a_checkpoint(
     assert verify_outputs(tmp_path) == []
     (problem,) = verify_outputs(tmp_path, finished=True)
     assert "had its refinement cut short (a checkpoint kept to resume)" in problem
-    assert "without --time-limit" in problem
+    assert "--resume to go on" in problem
