@@ -63,7 +63,7 @@ def sum_shares(pair, source, weight, pairs):
     out_source = np.empty(n, dtype=np.int64)
     out_weight = np.empty(n)
     out_pointer = np.zeros(pairs + 1, dtype=np.int64)
-    count = 0
+    count = np.int64(0)
     for p in range(pairs):
         used = np.int64(0)
         for k in range(pointer[p], pointer[p + 1]):

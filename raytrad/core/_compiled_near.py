@@ -194,7 +194,7 @@ def spread_shares(
     rules = (rule, rule_weight)
     work = (stack, cut, np.empty(3))
     buffers = (item_source, item_weight, item_area)
-    done = 0
+    done = np.int64(0)
     for p in range(len(points)):
         used = np.int64(0)
         for r in range(node_ptr[p], node_ptr[p + 1]):  # the nodes handed on whole

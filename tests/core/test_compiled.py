@@ -246,10 +246,10 @@ def test_borrowing_helpers_allocate_nothing_and_count_no_references() -> None:
 
     import numba
 
-    from raytrad.core import _compiled_kernels, _compiled_near
+    from raytrad.core import _compiled_gather, _compiled_kernels, _compiled_near
 
     kernels = compiled._dispatchers(numba)
-    for module in (_compiled_kernels, _compiled_near):
+    for module in (_compiled_kernels, _compiled_near, _compiled_gather):
         assert set(module.BORROWING) <= set(module.KERNELS)
         for name in module.BORROWING:
             source = inspect.getsource(kernels[name].py_func)
