@@ -108,6 +108,7 @@ def test_a_resume_says_what_it_took(
     assert status == 0, err
     assert "0 in the form-factor pass of this run" in stdout
     assert "every column came from the checkpoint" in stdout
+    assert "rays/s" not in stdout.split("rays       ")[1].split("\n")[0]  # no rate of nothing
     report = json.loads((out / "report.json").read_text())
     assert report["resumed"]["shots"] == 5 and report["solve"]["stop_reason"] == "converged"
 

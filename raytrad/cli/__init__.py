@@ -214,15 +214,13 @@ def _print_summary(report: dict[str, Any], outputs: dict[str, Path]) -> None:
         f"residual {s['residual']:.2e}",
         f"rays       {s['rays']} in the form-factor pass"
         + (" of this run" if report.get("resumed") else "")
-        + f" ({s['rays_per_second']:.3g} rays/s"
         + (
-            "; nothing can occlude, no rays needed"
+            " (nothing can occlude, no rays needed)"
             if not stats["occlusion_tested"]
-            else "; every column came from the checkpoint"
+            else " (every column came from the checkpoint)"
             if report.get("resumed") and not s["rays_naive"]
-            else f"; {_naive(s['rays'], s['rays_naive'])}"
-        )
-        + ")",
+            else f" ({s['rays_per_second']:.3g} rays/s; {_naive(s['rays'], s['rays_naive'])})"
+        ),
         "time       " + ", ".join(f"{k} {v:.2f}s" for k, v in t.items()) + f"; total {total:.2f}s",
     ]
     error = report.get("error") or {}
