@@ -270,7 +270,7 @@ def render(
                 )
             error_log = monitor.finish(result.state)
             saved = result.stop_reason in RESUMABLE or budget.seconds is not None
-            if saved:  # every column: --resume goes on shooting, or refining, without a pass
+            if saved and not resuming.unchanged(taken, result.state, prepared.mesh.patch_count):
                 with timed(timings, "checkpoint"):  # hundreds of MB at large sizes
                     save(result.state, whole=prepared.engine.complete)
             prepared.engine.release_columns()  # refinement and the outputs need none

@@ -393,13 +393,17 @@ def test_a_cut_refinement_resumes_from_its_last_round(
     monkeypatch.setattr(adaptive, "_gather", gather)
     out = tmp_path / "cut"
     kept = out / "cornell-box.refinement.npz"
-    rounds = []
+    checkpoint = out / "cornell-box.checkpoint.npz"
+    rounds, written = [], []
     for resume in (False, True):  # the budget is spent in each run's second gather
         gathers[0] = 0
         cut = api.render(scene, out, settings, resume=resume, stop=lambda: gathers[0] >= 2)
         assert cut.refinement.stopped and cut.outputs["refinement"] == kept and kept.is_file()
         rounds.append(cut.refinement.rounds)
+        written.append(checkpoint.stat().st_mtime_ns)
     assert rounds == [1, 2]  # the resume went on from round 1
+    # its solve had converged: the checkpoint already held its state and every column
+    assert written[1] == written[0] and "checkpoint" not in cut.report["timings_seconds"]
     # rounds made under other refinement settings are not gone on from
     other = dataclasses.replace(settings, refine=RefineSettings(threshold=0.2))
     gathers[0] = 0
@@ -408,7 +412,7 @@ def test_a_cut_refinement_resumes_from_its_last_round(
     last = api.render(scene, out, settings, resume=True)
     assert not last.refinement.stopped and last.refinement.rounds == straight.refinement.rounds
     assert last.refinement.rays == straight.refinement.rays
-    assert not kept.exists() and not (out / "cornell-box.checkpoint.npz").exists()
+    assert not kept.exists() and not checkpoint.exists()
     _, _, want = read_radiosity_ply(tmp_path / "straight" / "cornell-box.ply")
     _, _, got = read_radiosity_ply(out / "cornell-box.ply")
     np.testing.assert_array_equal(got, want)
