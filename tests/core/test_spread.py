@@ -322,8 +322,8 @@ def test_compiled_gather_rows_match_numpy(monkeypatch: pytest.MonkeyPatch) -> No
         for a, b in ((g.receivers, g2.receivers), (g.pointer, g2.pointer), (g.sources, g2.sources)):
             np.testing.assert_array_equal(a, b)
         # each row sums to 1; the paths differ by up to 7.2e-8 on a few rows (receivers
-        # beside the box's edges, found 2026-12-05 with the element-level spreads and
-        # the near fields equal: see the CHANGELOG), stored as float32
+        # beside the box's edges: linear_corner_shares against its numpy reference for a
+        # triangle with two corners on the receiver's horizon, see the CHANGELOG), float32
         np.testing.assert_allclose(g.weights, g2.weights, rtol=0, atol=1.5e-7)
         near_rows += len(g.receivers)
     assert near_rows > 100
