@@ -89,18 +89,20 @@ def spatially_ordered(points: np.ndarray, indices: np.ndarray) -> tuple[np.ndarr
 
 
 def corner_mean(corners: np.ndarray) -> np.ndarray:
-    """(N, D) ``corners.mean(axis=1)`` of (N, 3, D) corners, to the bit (the rows added in
-    order, then divided by 3)."""
+    """(N, D) ``corners.mean(axis=1)`` of (N, 3, D) corners, or (N,) of (N, 3) values, to
+    the bit (the rows added in order, then divided by 3)."""
     return (corners[:, 0] + corners[:, 1] + corners[:, 2]) / 3.0
 
 
 def corner_min(corners: np.ndarray) -> np.ndarray:
-    """(N, D) ``corners.min(axis=1)`` of (N, 3, D) corners (no NaN)."""
+    """(N, D) ``corners.min(axis=1)`` of (N, 3, D) corners, or (N,) of (N, 3) values (no
+    NaN)."""
     return np.minimum(np.minimum(corners[:, 0], corners[:, 1]), corners[:, 2])
 
 
 def corner_max(corners: np.ndarray) -> np.ndarray:
-    """(N, D) ``corners.max(axis=1)`` of (N, 3, D) corners (no NaN)."""
+    """(N, D) ``corners.max(axis=1)`` of (N, 3, D) corners, or (N,) of (N, 3) values (no
+    NaN)."""
     return np.maximum(np.maximum(corners[:, 0], corners[:, 1]), corners[:, 2])
 
 

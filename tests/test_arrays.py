@@ -99,5 +99,8 @@ def test_corner_reductions_are_numpys_to_the_bit(scale: float) -> None:
     np.testing.assert_array_equal(corner_max(corners), corners.max(axis=1))
     reference = np.linalg.norm(corners - np.roll(corners, 1, axis=1), axis=2).max(axis=1)
     np.testing.assert_array_equal(longest_side(corners), reference)
+    values = corners[:, :, 1]  # (N, 3): a value per corner, as refinement ranks them
+    np.testing.assert_array_equal(corner_mean(values), values.mean(axis=1))
+    np.testing.assert_array_equal(corner_max(values) - corner_min(values), np.ptp(values, axis=1))
     right = np.array([[[0.0, 0.0, 0.0], [3.0, 0.0, 0.0], [0.0, 4.0, 0.0]]])
     assert longest_side(right)[0] == 5.0
