@@ -12,51 +12,12 @@ import numpy as np
 
 #: Every function to compile, each after the helpers it calls.
 KERNELS = (
-    "patch_spread",
     "patch_spread_rows",
     "patch_average",
     "shoot",
     "column_sweep",
     "column_final",
 )
-
-
-def patch_spread(
-    entry_receiver, entry_patch, entry_weight, radiosity, entry_shot, unshot, patch_count
-):
-    """Per patch ``sum_k W_pk |dB_pk - dB_p|`` and ``max_k |dB_pk|`` (see
-    :meth:`raytrad.core.system.DiscreteSystem.numpy_spread`). The entries come by receiver,
-    so the patch being summed is held in registers while it stays the same (the same sums
-    in the same order)."""
-    spread = np.zeros((patch_count, 3))
-    peak = np.zeros((patch_count, 3))
-    held = -1
-    s0 = s1 = s2 = m0 = m1 = m2 = u0 = u1 = u2 = 0.0
-    for e in range(len(entry_receiver)):
-        k = entry_receiver[e]
-        p = entry_patch[e]
-        if p != held:
-            if held >= 0:
-                spread[held, 0], spread[held, 1], spread[held, 2] = s0, s1, s2
-                peak[held, 0], peak[held, 1], peak[held, 2] = m0, m1, m2
-            held = p
-            s0, s1, s2 = spread[p, 0], spread[p, 1], spread[p, 2]
-            m0, m1, m2 = peak[p, 0], peak[p, 1], peak[p, 2]
-            u0, u1, u2 = unshot[p, 0], unshot[p, 1], unshot[p, 2]
-        w = entry_weight[e]
-        own0 = radiosity[k, 0] - entry_shot[e, 0]
-        own1 = radiosity[k, 1] - entry_shot[e, 1]
-        own2 = radiosity[k, 2] - entry_shot[e, 2]
-        s0 += w * abs(own0 - u0)
-        s1 += w * abs(own1 - u1)
-        s2 += w * abs(own2 - u2)
-        m0 = max(m0, abs(own0))
-        m1 = max(m1, abs(own1))
-        m2 = max(m2, abs(own2))
-    if held >= 0:
-        spread[held, 0], spread[held, 1], spread[held, 2] = s0, s1, s2
-        peak[held, 0], peak[held, 1], peak[held, 2] = m0, m1, m2
-    return spread, peak
 
 
 def patch_spread_rows(
@@ -71,10 +32,11 @@ def patch_spread_rows(
     spread,
     peak,
 ):
-    """:func:`patch_spread` of the patches ``rows`` alone, into ``spread`` and ``peak``
+    """Per patch of ``rows`` ``sum_k W_pk |dB_pk - dB_p|`` and ``max_k |dB_pk|`` (see
+    :meth:`raytrad.core.system.DiscreteSystem.numpy_spread`), into ``spread`` and ``peak``
     (P, 3) in place: each patch's entries (``patch_entries[patch_ptr[p]:patch_ptr[p + 1]]``,
-    ascending, as :func:`patch_spread` meets them) summed from zero in the same order,
-    so to the same bits."""
+    ascending) summed from zero in that order, so a patch's sums do not depend on which
+    other patches are summed with it."""
     for i in range(len(rows)):
         p = rows[i]
         u0, u1, u2 = unshot[p, 0], unshot[p, 1], unshot[p, 2]

@@ -88,17 +88,6 @@ SIGNATURES: dict[str, list[list[str]]] = {
             "int64",
         ],
     ],
-    "patch_spread": [
-        [
-            "Array(int64, 1, 'C', False, aligned=True)",
-            "Array(int64, 1, 'C', False, aligned=True)",
-            "Array(float64, 1, 'C', False, aligned=True)",
-            "Array(float64, 2, 'C', False, aligned=True)",
-            "Array(float64, 2, 'C', False, aligned=True)",
-            "Array(float64, 2, 'C', False, aligned=True)",
-            "int64",
-        ],
-    ],
     "patch_spread_rows": [
         [
             "Array(int64, 1, 'C', False, aligned=True)",
@@ -256,20 +245,19 @@ SIGNATURES: dict[str, list[list[str]]] = {
 
 SECONDS: dict[str, float] = {
     "block_irradiance": 0.26,
-    "blocked_pairs": 1.79,
-    "column_final": 0.09,
-    "column_sweep": 0.15,
-    "near_triangles": 3.78,
+    "blocked_pairs": 1.75,
+    "column_final": 0.08,
+    "column_sweep": 0.14,
+    "near_triangles": 3.72,
     "patch_average": 0.28,
-    "patch_spread": 0.40,
     "patch_spread_rows": 0.20,
-    "piecewise_contour_form_factor": 1.52,
-    "planar_contour_form_factor": 1.24,
+    "piecewise_contour_form_factor": 1.48,
+    "planar_contour_form_factor": 1.21,
     "sample_weights": 0.52,
-    "shaft_clear": 1.32,
-    "shoot": 1.28,
-    "spread_chunk": 4.59,
+    "shaft_clear": 1.30,
+    "shoot": 1.27,
+    "spread_chunk": 4.46,
     "sum_shares": 0.98,
     "visibility_rays": 0.53,
-    "visible_factors": 0.42,
+    "visible_factors": 0.41,
 }

@@ -10,19 +10,13 @@ computes what the solver needs of it per shot.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
 from raytrad.core import compiled
 from raytrad.core.gather import SubareaMeans, subarea_means
 from raytrad.core.mesh import RadiosityMesh
-
-#: :meth:`DiscreteSystem.respread` sums every patch again (receiver by receiver, in
-#: memory order) when a shot touched more than this share of them. The default Cornell
-#: box's shots touch about half of its entries; at this cut-off its solve took 0.95 of
-#: the time of summing every patch after every shot (medians of five alternating solves
-#: in one process; cut-offs of 0.5 to 1 were alike within the noise), the same bits.
-RESPREAD_SHARE = 0.7
 
 
 @dataclass(frozen=True)
@@ -106,16 +100,9 @@ class DiscreteSystem:
         fast = compiled.get()
         if fast is None:
             return self.numpy_spread(radiosity, entry_shot, unshot)
-        spread, peak = fast.patch_spread(
-            self.entry_receiver,
-            self.entry_patch,
-            self.entry_weight,
-            np.ascontiguousarray(radiosity),
-            np.ascontiguousarray(entry_shot),
-            np.ascontiguousarray(unshot),
-            len(self.patch_area),
-        )
-        return np.asarray(spread), np.asarray(peak)
+        count = len(self.patch_area)
+        zeros = (np.zeros((count, 3)), np.zeros((count, 3)))
+        return self._sum_rows(fast, np.arange(count), *zeros, (radiosity, entry_shot, unshot))
 
     def respread(
         self,
@@ -131,12 +118,26 @@ class DiscreteSystem:
         shots changed) are summed again, each over its entries in the order
         :meth:`spread` takes them, so the result is :meth:`spread`'s to the bit; the marks
         are cleared. Arguments as :meth:`spread`, ``spread`` and ``peak`` (P, 3)."""
-        fast = compiled.get()
         rows = np.flatnonzero(self.touched)
         self.touched[:] = False
-        if fast is None or len(rows) > RESPREAD_SHARE * len(self.touched):
+        fast = compiled.get()
+        if fast is None:
             return self.spread(radiosity, entry_shot, unshot)
-        spread, peak = np.array(spread), np.array(peak)
+        shots = (radiosity, entry_shot, unshot)
+        return self._sum_rows(fast, rows, np.array(spread), np.array(peak), shots)
+
+    def _sum_rows(
+        self,
+        fast: Any,
+        rows: np.ndarray,
+        spread: np.ndarray,
+        peak: np.ndarray,
+        shots: tuple[np.ndarray, np.ndarray, np.ndarray],
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """``spread`` and ``peak`` with the patches ``rows`` summed again by the compiled
+        kernels ``fast``, in place (each patch over its entries in ascending order);
+        ``shots`` is (radiosity, entry_shot, unshot) as :meth:`spread` takes them."""
+        radiosity, entry_shot, unshot = shots
         fast.patch_spread_rows(
             rows,
             self.patch_entries,
