@@ -22,7 +22,7 @@ KERNELS = (
     "by_pair",
     "_add",
     "_emit",
-    "sum_shares",
+    "node_means",
     "_gathered",
     "gather_sums",
     "block_irradiance",
@@ -47,30 +47,37 @@ def _sort_ascending(values, n):
         gap //= 3
 
 
-def sum_shares(pair, source, weight, pairs):
-    """Positive weights summed per (pair, source), sources ascending within a pair,
-    normalised to sum 1 per pair (see :func:`raytrad.core.gather.numpy_sum_shares`; the
-    same sums in the same order). ``pair`` need not be sorted: a stable counting sort
-    groups it (:func:`by_pair`), and each pair's sources are summed in a dense scratch
-    row."""
-    n = len(pair)
-    pointer, order = by_pair(pair, pairs)
-    top = 0
-    for i in range(n):
-        top = max(top, source[i])
-    scratch = np.zeros(top + 1)
-    touched = np.empty(n, dtype=np.int64)
-    out_source = np.empty(n, dtype=np.int64)
-    out_weight = np.empty(n)
-    out_pointer = np.zeros(pairs + 1, dtype=np.int64)
+def node_means(start, stop, sub_tri, visible_area, corners, corner_share, receivers):
+    """Each node's mean of its visible receivers, for the nodes whose triangles are the
+    slots ``start[i]:stop[i]`` of ``sub_tri``: CSR ``pointer`` (nodes + 1,), ``sources``
+    and ``weights`` (see :func:`raytrad.core.gather.numpy_node_means`; the same sums in
+    the same order, without its (slots, 3) temporaries). ``corners`` (T, 3) are the
+    triangles' receivers (below ``receivers``) and ``corner_share`` (T, 3) their shares."""
+    nodes = len(start)
+    entries = np.int64(0)
+    widest = np.int64(0)
+    for i in range(nodes):
+        width = 3 * (stop[i] - start[i])
+        entries += width
+        widest = max(widest, width)
+    scratch = np.zeros(receivers)
+    touched = np.empty(widest, dtype=np.int64)
+    out_source = np.empty(entries, dtype=np.int64)
+    out_weight = np.empty(entries)
+    out_pointer = np.zeros(nodes + 1, dtype=np.int64)
     count = np.int64(0)
-    for p in range(pairs):
+    for i in range(nodes):
+        total = 0.0
+        for slot in range(start[i], stop[i]):
+            total += visible_area[sub_tri[slot]]
         used = np.int64(0)
-        for k in range(pointer[p], pointer[p + 1]):
-            i = order[k]
-            used = _add(source[i], weight[i], scratch, touched, used)
+        for slot in range(start[i], stop[i]):
+            t = sub_tri[slot]
+            share = visible_area[t] / total if total > 0.0 else 0.0
+            for k in range(3):
+                used = _add(corners[t, k], share * corner_share[t, k], scratch, touched, used)
         count = _emit(touched, used, scratch, out_source, out_weight, count)
-        out_pointer[p + 1] = count
+        out_pointer[i + 1] = count
     return out_pointer, out_source[:count].copy(), out_weight[:count].copy()
 
 

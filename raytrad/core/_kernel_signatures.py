@@ -78,6 +78,17 @@ SIGNATURES: dict[str, list[list[str]]] = {
             "Array(float64, 1, 'C', False, aligned=True)",
         ],
     ],
+    "node_means": [
+        [
+            "Array(int64, 1, 'C', False, aligned=True)",
+            "Array(int64, 1, 'C', False, aligned=True)",
+            "Array(int64, 1, 'C', False, aligned=True)",
+            "Array(float64, 1, 'C', False, aligned=True)",
+            "Array(int64, 2, 'C', False, aligned=True)",
+            "Array(float64, 2, 'C', False, aligned=True)",
+            "int64",
+        ],
+    ],
     "patch_average": [
         [
             "Array(int64, 1, 'C', False, aligned=True)",
@@ -211,14 +222,6 @@ SIGNATURES: dict[str, list[list[str]]] = {
             "Tuple((Tuple((Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True))), Array(float64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int64, 2, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), int64, Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True)))",
         ],
     ],
-    "sum_shares": [
-        [
-            "Array(int64, 1, 'C', False, aligned=True)",
-            "Array(int64, 1, 'C', False, aligned=True)",
-            "Array(float64, 1, 'C', False, aligned=True)",
-            "int64",
-        ],
-    ],
     "visibility_rays": [
         [
             "Array(float64, 2, 'C', False, aligned=True)",
@@ -244,20 +247,20 @@ SIGNATURES: dict[str, list[list[str]]] = {
 }
 
 SECONDS: dict[str, float] = {
-    "block_irradiance": 0.26,
-    "blocked_pairs": 1.75,
+    "block_irradiance": 0.25,
+    "blocked_pairs": 1.76,
     "column_final": 0.08,
     "column_sweep": 0.14,
-    "near_triangles": 3.72,
+    "near_triangles": 3.83,
+    "node_means": 0.90,
     "patch_average": 0.28,
     "patch_spread_rows": 0.20,
-    "piecewise_contour_form_factor": 1.48,
-    "planar_contour_form_factor": 1.21,
-    "sample_weights": 0.52,
-    "shaft_clear": 1.30,
-    "shoot": 1.27,
-    "spread_chunk": 4.46,
-    "sum_shares": 0.98,
-    "visibility_rays": 0.53,
-    "visible_factors": 0.41,
+    "piecewise_contour_form_factor": 1.65,
+    "planar_contour_form_factor": 1.46,
+    "sample_weights": 0.51,
+    "shaft_clear": 1.49,
+    "shoot": 1.28,
+    "spread_chunk": 5.03,
+    "visibility_rays": 0.62,
+    "visible_factors": 0.47,
 }

@@ -23,6 +23,8 @@ solution as a correction that is itself shot on (:func:`raytrad.core.solver.solv
 from __future__ import annotations
 
 import functools
+import itertools
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -30,6 +32,7 @@ import numpy as np
 from raytrad.core import compiled
 from raytrad.core.clusters import Clusters, build_clusters, runs
 from raytrad.core.mesh import RadiosityMesh
+from raytrad.core.visibility import worker_count
 
 #: Pairs whose receiver is nearer than this many patch radii to the patch's centre gather
 #: the patch's radiosity as it varies across it.
@@ -344,34 +347,120 @@ def visible_areas(mesh: RadiosityMesh, corner_share: np.ndarray) -> np.ndarray:
 def cluster_means(mesh: RadiosityMesh, corner_share: np.ndarray, tree: Clusters) -> SubareaMeans:
     """Each node of ``tree`` (sub-areas and their clusters) as an area-weighted mean of its
     visible receivers: a triangle weighs its area if any corner is visible (``corner_share``
-    (T, 3), :func:`corner_shares`), split over those corners."""
+    (T, 3), :func:`corner_shares`), split over those corners.
+
+    The nodes go in batches of at most :data:`MEAN_SLOTS` slots (nodes share slots with
+    their halves), on every core (:func:`~raytrad.core.visibility.worker_count`): each
+    refinement round rebuilds these means for the whole mesh while nothing else runs."""
     visible_area = visible_areas(mesh, corner_share)
     lengths = np.cumsum(tree.stop - tree.start)
-    pointers, receivers, shares = [np.zeros(1, np.int64)], [], []
-    first = 0
-    while first < tree.count:  # nodes share slots with their halves: a few million at a time
-        last = max(first + 1, int(np.searchsorted(lengths, lengths[first] + MEAN_SLOTS)))
-        owner, slots = runs(tree.start[first:last], tree.stop[first:last])
-        tri = tree.sub_tri[slots]
-        area = visible_area[tri]
-        total = np.bincount(owner, weights=area, minlength=last - first)[owner]
-        share = np.divide(area, total, out=np.zeros_like(area), where=total > 0)
-        pointer, part_receivers, part_shares = sum_shares(
-            np.repeat(owner, 3),
-            mesh.triangle_receivers[tri].reshape(-1),
-            (share[:, None] * corner_share[tri]).reshape(-1),
-            last - first,
+    workers = worker_count()
+    step = min(MEAN_SLOTS, max(MEAN_SLOTS // 64, -(-int(lengths[-1:].sum()) // workers)))
+    bounds = [0]
+    while bounds[-1] < tree.count:
+        first = bounds[-1]
+        bounds.append(max(first + 1, int(np.searchsorted(lengths, lengths[first] + step))))
+
+    def batch(span: tuple[int, int]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        nodes = slice(*span)
+        return node_means(
+            tree.start[nodes],
+            tree.stop[nodes],
+            tree.sub_tri,
+            visible_area,
+            mesh.triangle_receivers,
+            corner_share,
+            mesh.receiver_count,
         )
+
+    spans = list(itertools.pairwise(bounds))
+    if len(spans) > 1 and workers > 1:
+        with ThreadPoolExecutor(min(workers, len(spans))) as pool:
+            parts = list(pool.map(batch, spans))
+    else:
+        parts = [batch(span) for span in spans]
+    pointers = [np.zeros(1, np.int64)]
+    for pointer, _, _ in parts:
         pointers.append(pointer[1:] + pointers[-1][-1])
-        receivers.append(part_receivers)
-        shares.append(part_shares)
-        first = last
     return SubareaMeans(
         mesh.receiver_count,
         np.concatenate(pointers),
-        np.concatenate(receivers),
-        np.concatenate(shares),
+        np.concatenate([np.zeros(0, np.int64)] + [part[1] for part in parts]),
+        np.concatenate([np.zeros(0)] + [part[2] for part in parts]),
         tree.patch_ptr,
+    )
+
+
+def node_means(
+    start: np.ndarray,
+    stop: np.ndarray,
+    sub_tri: np.ndarray,
+    visible_area: np.ndarray,
+    corners: np.ndarray,
+    corner_share: np.ndarray,
+    receivers: int,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Each node's area-weighted mean of its visible receivers, compiled when available
+    (see :func:`numpy_node_means`, the reference: the same sums in the same order)."""
+    fast = compiled.get()
+    if fast is None:
+        return numpy_node_means(
+            start, stop, sub_tri, visible_area, corners, corner_share, receivers
+        )
+    pointer, sources, shares = fast.node_means(
+        np.ascontiguousarray(start, dtype=np.int64),
+        np.ascontiguousarray(stop, dtype=np.int64),
+        np.ascontiguousarray(sub_tri, dtype=np.int64),
+        np.ascontiguousarray(visible_area, dtype=np.float64),
+        np.ascontiguousarray(corners, dtype=np.int64),
+        np.ascontiguousarray(corner_share, dtype=np.float64),
+        int(receivers),
+    )
+    return pointer, sources, shares
+
+
+def numpy_node_means(
+    start: np.ndarray,
+    stop: np.ndarray,
+    sub_tri: np.ndarray,
+    visible_area: np.ndarray,
+    corners: np.ndarray,
+    corner_share: np.ndarray,
+    receivers: int,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Each node's area-weighted mean of its visible receivers.
+
+    Parameters
+    ----------
+    start, stop : (K,) int64
+        Each node's slots ``start:stop`` of ``sub_tri``.
+    sub_tri : (S,) int64
+        Triangles (:class:`~raytrad.core.clusters.Clusters` ``sub_tri``).
+    visible_area : (T,) float64
+        Each triangle's weight [m2] (:func:`visible_areas`).
+    corners : (T, 3) int64
+        Each triangle's receivers, below ``receivers``.
+    corner_share : (T, 3) float64
+        Each corner's share of its triangle (:func:`corner_shares`).
+    receivers : int
+        The receiver count (the length of the compiled loop's scratch row).
+
+    Returns
+    -------
+    pointer : (K + 1,) int64
+    sources : (Q,) int64, receivers ascending within a node
+    weights : (Q,) float64, summing to 1 a node (none for a node with no visible area)
+    """
+    owner, slots = runs(start, stop)
+    tri = sub_tri[slots]
+    area = visible_area[tri]
+    total = np.bincount(owner, weights=area, minlength=len(start))[owner]
+    share = np.divide(area, total, out=np.zeros_like(area), where=total > 0)
+    return numpy_sum_shares(
+        np.repeat(owner, 3),
+        corners[tri].reshape(-1),
+        (share[:, None] * corner_share[tri]).reshape(-1),
+        len(start),
     )
 
 
@@ -382,23 +471,6 @@ def _csr_slots(pointer: np.ndarray, rows: np.ndarray) -> tuple[np.ndarray, np.nd
     owner = np.repeat(np.arange(len(rows)), counts)
     index = np.repeat(pointer[rows] - np.cumsum(counts) + counts, counts)
     return owner, index + np.arange(len(owner))
-
-
-def sum_shares(
-    pair: np.ndarray, source: np.ndarray, weight: np.ndarray, pairs: int
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Weights summed per (pair, source), compiled when available (see
-    :func:`numpy_sum_shares`, the reference)."""
-    fast = compiled.get()
-    if fast is None:
-        return numpy_sum_shares(pair, source, weight, pairs)
-    pointer, sources, weights = fast.sum_shares(
-        np.ascontiguousarray(pair, dtype=np.int64),
-        np.ascontiguousarray(source, dtype=np.int64),
-        np.ascontiguousarray(weight, dtype=np.float64),
-        int(pairs),
-    )
-    return pointer, sources, weights
 
 
 def numpy_sum_shares(

@@ -9,9 +9,16 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from raytrad.core import compiled
+from raytrad.core import compiled, gather
 from raytrad.core.clusters import CLUSTER_TRIANGLES, Clusters, build_clusters
-from raytrad.core.gather import subarea_means, subarea_triangles
+from raytrad.core.gather import (
+    corner_shares,
+    node_means,
+    numpy_node_means,
+    subarea_means,
+    subarea_triangles,
+    visible_areas,
+)
 from raytrad.core.mesh import MeshSettings, RadiosityMesh, build_mesh
 from raytrad.scene.builder import quads_scene
 from raytrad.scene.builtin import cornell_box
@@ -173,6 +180,41 @@ def test_cluster_means_are_area_weighted_over_visible_corners(
                 area += mesh.triangle_area[t]
         want = total / area if area > 0 else np.zeros(3)
         np.testing.assert_allclose(extended[mesh.receiver_count + n], want, rtol=1e-12)
+
+
+@pytest.mark.skipif(compiled.get() is None, reason="numba is not installed")
+def test_compiled_node_means_match_numpy(clustered: tuple[RadiosityMesh, Clusters]) -> None:
+    """The compiled means loop against its numpy reference, bit for bit, with hidden
+    corners and a triangle wholly hidden: the same sums in the same order."""
+    mesh, tree = clustered
+    rng = np.random.default_rng(14)
+    visible = rng.random(mesh.receiver_count) > 0.2
+    visible[mesh.triangle_receivers[tree.sub_tri[tree.start[5] : tree.stop[5]]]] = False
+    mesh = replace(mesh, receiver_visible=visible)
+    share = corner_shares(mesh)
+    area = visible_areas(mesh, share)
+    args = (tree.sub_tri, area, mesh.triangle_receivers, share, mesh.receiver_count)
+    fast = node_means(tree.start, tree.stop, *args)
+    slow = numpy_node_means(tree.start, tree.stop, *args)
+    for got, want in zip(fast, slow, strict=True):
+        np.testing.assert_array_equal(got, want)
+    assert fast[0][6] == fast[0][5]  # the hidden node has no mean
+
+
+def test_cluster_means_do_not_depend_on_batches_or_threads(
+    clustered: tuple[RadiosityMesh, Clusters], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Means built in one batch, in many small ones on one thread and on two threads are
+    the same to the bit (each node's sums are its own)."""
+    mesh, _ = clustered
+    whole = subarea_means(mesh)
+    for threads, slots in (("1", 64), ("2", 64), ("2", 1 << 18)):
+        monkeypatch.setenv("RAYTRAD_THREADS", threads)
+        monkeypatch.setattr(gather, "MEAN_SLOTS", slots)
+        parted = subarea_means(mesh)
+        np.testing.assert_array_equal(parted.pointer, whole.pointer)
+        np.testing.assert_array_equal(parted.receivers, whole.receivers)
+        np.testing.assert_array_equal(parted.shares, whole.shares)
 
 
 def test_trees_do_not_depend_on_where_the_scene_sits() -> None:

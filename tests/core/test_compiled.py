@@ -137,7 +137,7 @@ def test_numpy_kernels_on_request(monkeypatch):
 
 @pytest.mark.parametrize("n", [0, 1, 2, 3, 4, 13, 14, 40, 41, 500])
 def test_the_gather_sort_agrees_with_numpy(n):
-    # sum_shares sorts each pair's sources with its own loop instead of np.sort (whose
+    # the means and spreads sort each pair's sources with its own loop instead of np.sort (whose
     # compilation took seconds of a first run): the same order, duplicates and a tail
     # beyond n left alone
     rng = np.random.default_rng(n)

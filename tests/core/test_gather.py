@@ -15,14 +15,12 @@ from collections.abc import Callable
 import numpy as np
 import pytest
 
-from raytrad.core import compiled
 from raytrad.core.gather import (
     GatherRows,
     GatherWeights,
     gathered_irradiance,
     numpy_gathered_irradiance,
     numpy_sum_shares,
-    sum_shares,
 )
 from raytrad.core.kernels import linear_corner_shares, numpy_polygon_form_factor
 from raytrad.core.pairs import receiver_points
@@ -142,8 +140,9 @@ def test_shots_conserve_power_in_a_closed_box(
     np.testing.assert_allclose(result.radiosity * (1 - 0.99), 1.0, rtol=2e-3)
 
 
-@pytest.mark.skipif(compiled.get() is None, reason="numba is not installed")
-def test_compiled_share_sums_match_numpy() -> None:
+def test_share_sums_per_pair_and_source() -> None:
+    """numpy_sum_shares (the reference the compiled means and spreads are held to)
+    against sums taken pair by pair."""
     rng = np.random.default_rng(11)
     pairs = 300
     pair = rng.integers(0, pairs, 20000)
@@ -153,11 +152,10 @@ def test_compiled_share_sums_match_numpy() -> None:
     weight = rng.random(20000) + 1e-3
     weight[100:400] = 0.0  # left out, like negative weights
     weight[400:420] = -1.0
-    fast = sum_shares(pair, source, weight, pairs)
-    slow = numpy_sum_shares(pair, source, weight, pairs)
-    np.testing.assert_array_equal(fast[0], slow[0])
-    np.testing.assert_array_equal(fast[1], slow[1])
-    np.testing.assert_allclose(fast[2], slow[2], rtol=1e-15, atol=0)
+    fast = numpy_sum_shares(pair, source, weight, pairs)
+    for p in (0, 7, 150):
+        kept = (pair == p) & (weight > 0)
+        np.testing.assert_array_equal(fast[1][fast[0][p] : fast[0][p + 1]], np.unique(source[kept]))
     # independent check: each pair's weights sum to 1 and carry the raw sums' proportions
     sums = np.bincount(pair, weights=np.maximum(weight, 0.0), minlength=pairs)
     got = np.add.reduceat(fast[2], fast[0][:-1][np.diff(fast[0]) > 0])
