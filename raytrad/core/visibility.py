@@ -184,13 +184,19 @@ class Occluder:
         if n <= RAY_CHUNK or self._workers == 1:
             return self._run(o, d, t)
         bounds = [*list(range(0, n, RAY_CHUNK)), n]
-        if self._pool is None:
-            self._pool = ThreadPoolExecutor(self._workers, thread_name_prefix="raytrad-rays")
-        parts = self._pool.map(
+        parts = self._threads().map(
             lambda ab: self._run(o[ab[0] : ab[1]], d[ab[0] : ab[1]], t[ab[0] : ab[1]]),
             itertools.pairwise(bounds),
         )
         return np.concatenate(list(parts))
+
+    def _threads(self) -> ThreadPoolExecutor:
+        """The pool the batches run on (made on first use; never called from its own
+        threads, whose batches would wait for each other)."""
+        with self._lock:
+            if self._pool is None:
+                self._pool = ThreadPoolExecutor(self._workers, thread_name_prefix="raytrad-rays")
+            return self._pool
 
     def _run(self, o: np.ndarray, d: np.ndarray, t: np.ndarray) -> np.ndarray:
         out = np.empty(len(o), dtype=bool)
@@ -223,7 +229,7 @@ class Occluder:
         d = np.ascontiguousarray(directions, dtype=np.float32)
         with self._lock:
             self.rays_cast += len(o)
-        triangle, distance, _ = self.intersect_barycentric_local(o, d)
+        triangle, distance, _ = self._intersect(o, d, barycentric=False)
         return triangle, distance
 
     def intersect_barycentric_local(
@@ -239,16 +245,24 @@ class Occluder:
         """
         o = np.ascontiguousarray(origins, dtype=np.float32)
         d = np.ascontiguousarray(directions, dtype=np.float32)
+        return self._intersect(o, d, barycentric=True)
+
+    def _intersect(
+        self, o: np.ndarray, d: np.ndarray, barycentric: bool
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Closest hits of float32 rays, in batches of :data:`RAY_CHUNK`; the barycentric
+        weights only when asked for ((0, 3) otherwise: a probe needs none)."""
         triangle = np.empty(len(o), dtype=np.int64)
         distance = np.empty(len(o))
-        weights = np.zeros((len(o), 3))
+        weights = np.zeros((len(o) if barycentric else 0, 3))
         for start in range(0, len(o), RAY_CHUNK):
             stop = start + RAY_CHUNK
             hit = self._scene.run(o[start:stop], d[start:stop], query="INTERSECT", output=True)
             triangle[start:stop] = hit["primID"]
             distance[start:stop] = np.where(hit["primID"] >= 0, hit["tfar"], np.inf)
-            u, v = np.asarray(hit["u"], np.float64), np.asarray(hit["v"], np.float64)
-            weights[start:stop] = np.stack([1.0 - u - v, u, v], axis=1)
+            if barycentric:
+                u, v = np.asarray(hit["u"], np.float64), np.asarray(hit["v"], np.float64)
+                weights[start:stop] = np.stack([1.0 - u - v, u, v], axis=1)
         return triangle, distance, weights
 
     def enclosed(
@@ -313,18 +327,21 @@ class Occluder:
         rays: int,
     ) -> np.ndarray:
         """(N, rays) int8: _MISS, _FRONT, _BACK or _COVER for a fixed cosine set of
-        directions."""
+        directions, in blocks of points whose rays fill about :data:`RAY_CHUNK` on every
+        core (each ray's code is its own: the same codes however the threads run)."""
         directions = _fibonacci_hemisphere(rays)  # (K, 3) about +z
         origin = self.to_local(points) + tol.ray_margin * self.diagonal * normals
         tangent, bitangent = _frames(normals)
         out = np.empty((len(points), rays), dtype=np.int8)
-        for k in range(rays):
+
+        def probe(block: slice) -> None:
             d = (
-                directions[k, 0] * tangent
-                + directions[k, 1] * bitangent
-                + directions[k, 2] * normals
-            )
-            hit, distance = self.intersect_local(origin, d)
+                directions[None, :, 0, None] * tangent[block, None, :]
+                + directions[None, :, 1, None] * bitangent[block, None, :]
+                + directions[None, :, 2, None] * normals[block, None, :]
+            ).reshape(-1, 3)
+            o = np.repeat(origin[block], rays, axis=0)
+            hit, distance = self.intersect_local(o, d)
             ok = hit >= 0
             back = np.zeros(len(hit), dtype=bool)
             # a grazing hit (the ray along the surface) counts as its front
@@ -333,7 +350,16 @@ class Occluder:
                 ~double_sided[hit[ok]]
             )
             cover = back & (distance < COVER_GAP * self.diagonal)
-            out[:, k] = np.where(~ok, _MISS, np.where(cover, _COVER, np.where(back, _BACK, _FRONT)))
+            code = np.where(~ok, _MISS, np.where(cover, _COVER, np.where(back, _BACK, _FRONT)))
+            out[block] = code.reshape(-1, rays)
+
+        per = max(1, RAY_CHUNK // rays)
+        blocks = [slice(a, a + per) for a in range(0, len(points), per)]
+        if self._workers == 1 or len(blocks) < 2:
+            for block in blocks:
+                probe(block)
+        else:
+            list(self._threads().map(probe, blocks))
         return out
 
     def occluded(

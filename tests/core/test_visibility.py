@@ -141,3 +141,33 @@ def test_ordered_map_keeps_order_and_bounds_what_runs_ahead() -> None:
         assert next(cut) == 0
         cut.close()
     assert len(started) <= 3
+
+
+def test_probes_give_the_same_codes_on_any_thread_count(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """The probes go in blocks of points on every core: one thread, two, and blocks of a
+    few points give the same codes; a point 3 mm under the sheet's back is covered, and
+    the floor's middle, 1.95 m under it, sees the closed room all round, nothing close."""
+    from raytrad.core import visibility
+
+    scene = _room_with_sheet(1.95, UP)
+    _, triangle_normals = triangle_areas_normals(scene.triangle_vertices())
+    rng = np.random.default_rng(3)
+    points = np.column_stack(
+        [rng.uniform(0.1, 1.9, 300), np.zeros(300), rng.uniform(0.1, 1.9, 300)]
+    )
+    points[:2] = [(1.0, 0.0, 1.0), (1.0, 1.947, 1.0)]
+    normals = np.tile(UP, (300, 1))
+    codes = []
+    for workers, chunk in ((1, 1 << 16), (2, 1 << 16), (2, 640)):
+        monkeypatch.setattr(visibility, "RAY_CHUNK", chunk)
+        with Occluder(scene.positions, scene.triangles) as occluder:
+            occluder._workers = workers
+            codes.append(
+                occluder._hemisphere_hits(points, normals, triangle_normals, scene.double_sided, 64)
+            )
+    for other in codes[1:]:
+        np.testing.assert_array_equal(other, codes[0])
+    assert not np.isin(codes[0][0], [visibility._MISS, visibility._COVER]).any()
+    assert (codes[0][1] == visibility._COVER).mean() > visibility.COVER_SHARE
