@@ -116,7 +116,12 @@ class Clusters:
         )
 
 
-def build_clusters(mesh: RadiosityMesh, sub_tri: np.ndarray, sub_ptr: np.ndarray) -> Clusters:
+def build_clusters(
+    mesh: RadiosityMesh,
+    sub_tri: np.ndarray,
+    sub_ptr: np.ndarray,
+    corners: np.ndarray | None = None,
+) -> Clusters:
     """The cluster trees of ``mesh``'s sub-areas.
 
     Parameters
@@ -125,13 +130,17 @@ def build_clusters(mesh: RadiosityMesh, sub_tri: np.ndarray, sub_ptr: np.ndarray
     sub_tri, sub_ptr : (T,), (SA + 1,) int64
         The triangles grouped by sub-area (:func:`~raytrad.core.gather.subarea_triangles`);
         only runs of sub-areas that are split are reordered (a copy).
+    corners : (T, 3, 3) float64 or None
+        ``mesh.positions[mesh.triangles]`` when the caller has it [m].
 
     Returns
     -------
     Clusters
     """
     sub_tri = np.array(sub_tri, dtype=np.int64)
-    centroid = corner_mean(mesh.positions[mesh.triangles])
+    if corners is None:
+        corners = mesh.positions[mesh.triangles]
+    centroid = corner_mean(corners)
     count = len(sub_ptr) - 1
     starts, stops, owners = [sub_ptr[:-1].astype(np.int64)], [sub_ptr[1:].astype(np.int64)], []
     owners.append(np.arange(count))
@@ -177,7 +186,7 @@ def build_clusters(mesh: RadiosityMesh, sub_tri: np.ndarray, sub_ptr: np.ndarray
     node_patch = mesh.subarea_patch[owner_sub]
     root = rank[:count]
     point, normal, area, size = _geometry(
-        mesh, sub_tri, (start, stop, left, right, level), centroid
+        mesh, sub_tri, (start, stop, left, right, level), centroid, corners
     )
     point[root], normal[root] = mesh.subarea_point, mesh.subarea_normal
     size[root] = mesh.subarea_size
@@ -224,10 +233,12 @@ def _geometry(
     sub_tri: np.ndarray,
     clusters: tuple[np.ndarray, ...],
     centroid: np.ndarray,
+    corners: np.ndarray,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Each node's sample point, normal, area and size (:class:`Clusters`), leaves from
     their triangles and the others from their halves, deepest first: one pass over the
-    triangles, whatever the depth."""
+    triangles, whatever the depth (``centroid`` (T, 3) and ``corners`` (T, 3, 3) the
+    triangles')."""
     start, stop, left, right, level = clusters
     tri_area = mesh.triangle_area[sub_tri]
     cum_area = np.concatenate([[0.0], np.cumsum(tri_area)])
@@ -238,10 +249,9 @@ def _geometry(
     leaf = np.flatnonzero(left < 0)
     leaf = leaf[np.argsort(start[leaf])]  # the leaves cover the slots once, in order
     offsets = start[leaf]
-    corners = mesh.positions[mesh.triangles[sub_tri]]
     lo, hi = np.empty((len(start), 3)), np.empty((len(start), 3))
-    lo[leaf] = np.minimum.reduceat(corner_min(corners), offsets)
-    hi[leaf] = np.maximum.reduceat(corner_max(corners), offsets)
+    lo[leaf] = np.minimum.reduceat(corner_min(corners)[sub_tri], offsets)
+    hi[leaf] = np.maximum.reduceat(corner_max(corners)[sub_tri], offsets)
     owner = np.repeat(np.arange(len(leaf)), stop[leaf] - start[leaf])
     distance = np.linalg.norm(centroid[sub_tri] - middle[leaf][owner], axis=1)
     nearest = _first_nearest(distance, owner, offsets)

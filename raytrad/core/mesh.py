@@ -432,10 +432,9 @@ def surface_receivers(
     third = np.repeat(area / 3.0, 3)
     r_area = np.bincount(inverse, weights=third, minlength=count)
     r_normal = np.zeros((count, 3))
-    centroid = np.repeat(corner_mean(positions[triangles]), 3, axis=0)
-    tri_normal = np.repeat(normal, 3, axis=0)
-    for k in range(3):
-        r_normal[:, k] = np.bincount(inverse, weights=tri_normal[:, k] * third, minlength=count)
+    for k in range(3):  # each corner's normal times its third: the triangle's, repeated
+        weights = np.repeat(normal[:, k] * (area / 3.0), 3)
+        r_normal[:, k] = np.bincount(inverse, weights=weights, minlength=count)
     # The inward point is the centroid of the receiver's largest own triangle, not a mean:
     # where a fin meets a wall, the mean of the triangles on both sides of the fin lies in
     # the fin's plane, and a receiver evaluated there would see half a hemisphere.
@@ -453,7 +452,7 @@ def surface_receivers(
     big = np.flatnonzero(near_largest)
     first = np.full(count, len(inverse), dtype=np.int64)
     np.minimum.at(first, inverse[big], big)
-    r_inward = centroid[first]
+    r_inward = corner_mean(positions[triangles[first // 3]])  # the corner's triangle's
     r_normal /= np.linalg.norm(r_normal, axis=1)[:, None]
     return inverse.reshape(-1, 3), positions[distinct // stride], r_normal, r_area, r_inward
 

@@ -41,12 +41,12 @@ class GatherShares:
     """
 
     def __init__(self, mesh: RadiosityMesh, sub_tri: np.ndarray, sub_ptr: np.ndarray) -> None:
+        self.tri_corners = mesh.positions[mesh.triangles]
         #: the sub-areas' cluster trees (their ``sub_tri`` is the order the near field uses)
-        self.tree = build_clusters(mesh, sub_tri, sub_ptr)
+        self.tree = build_clusters(mesh, sub_tri, sub_ptr, self.tri_corners)
         #: (T, 3) share of each corner of each triangle (0 for hidden corners)
         self.corner_share = corner_shares(mesh)
         self.corners = mesh.triangle_receivers
-        self.tri_corners = mesh.positions[mesh.triangles]
         self.tri_normal = mesh.triangle_normal
         #: (T,) area of each triangle with a visible corner [m2], and (N,) of each node
         self.visible_area = visible_areas(mesh, self.corner_share)
