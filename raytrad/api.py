@@ -7,7 +7,6 @@ from :mod:`raytrad`.
 from __future__ import annotations
 
 import logging
-import math
 import os
 import time
 from collections.abc import Callable
@@ -161,7 +160,7 @@ def estimate_error(
     ``solved`` holds the mesh that was solved, ``baked`` the (refined) mesh of
     ``result.radiosity``; the algebraic part is the last estimate of ``error_log``;
     ``quick`` (the run's time limit spent): the check traces an eighth of its points."""
-    estimate = [math.inf if v is None else v for v in error_log.as_dict()["estimate"][-1]]
+    estimate = [np.inf if v is None else v for v in error_log.as_dict()["estimate"][-1]]
     return pipeline.total_error(solved, baked, result, np.asarray(estimate), quick)
 
 
@@ -216,8 +215,8 @@ def render(
     progress : callable or None
         ``progress(RenderProgress)`` after each shot.
     stop : callable or None
-        Polled before each shot; True stops the solve, writes the outputs so far and a
-        checkpoint to resume from.
+        Polled after each column of the pass, shot and patch of a refinement round; True
+        stops there and writes the outputs so far and a checkpoint to resume from.
     reference : str or None
         Measure the true error against this reference (see :func:`make_reference`).
     plot : bool
@@ -289,14 +288,15 @@ def render(
                 if plot:
                     outputs["plot"] = output_dir / "convergence.png"
                     plot_convergence(outputs["plot"], {result.method: error_log}, str(scene_path))
-            keep = saved and (result.stop_reason in RESUMABLE or refinement.stopped)
+            if refinement.stopped and not saved:  # Ctrl-C while refining: the solve, its rounds
+                save(result.state)  # (the columns are released: --resume traces the pass)
+            keep = refinement.stopped or (saved and result.stop_reason in RESUMABLE)
             outputs |= resuming.keep_checkpoint(checkpoint, keep, refinement, key, solution)
             report = build_report(scene_path, baked, result, settings, timings, outputs)
             report |= {"outputs_detail": facts, "resumed": taken}
             add_error_log(report, error_log, ref)
             add_total_error(report, error_log, error, refinement, solved.mesh.receiver_count)
-            outputs["report"] = output_dir / "report.json"
-            write_report(outputs["report"], report)
+            write_report(outputs.setdefault("report", output_dir / "report.json"), report)
             made_from = run_manifest.content_key(loaded, settings)  # the manifest goes last
             outputs["manifest"] = run_manifest.write_manifest(
                 output_dir, outputs, report, made_from

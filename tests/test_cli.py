@@ -369,6 +369,56 @@ def test_a_time_limited_refinement_resumes_without_pass_or_solve(
     np.testing.assert_array_equal(got, want)
 
 
+@pytest.mark.skipif(sys.platform == "win32", reason="POSIX signals")
+def test_ctrl_c_while_refining_keeps_the_solve_and_its_rounds(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Ctrl-C in the second refinement round of a run without a time limit (so no
+    checkpoint was written after the solve, and refinement released the columns): the
+    run exits 130 with the bake so far, the solve's state and the finished round; --resume
+    traces the pass again but shoots nothing, goes on from that round and gives the
+    uninterrupted bake, leaving no checkpoint."""
+    import os
+
+    from raytrad.core import adaptive
+
+    scene = SCENES / "cornell-box.obj"
+    mesh = MeshSettings(receivers=800, patches=60)
+    straight = api.render(scene, tmp_path / "straight", RenderSettings(mesh=mesh))
+    assert straight.refinement.rounds >= 3
+    gathers = [0]
+    original = adaptive._gather
+
+    def gather(*args: object, **kwargs: object) -> object:
+        gathers[0] += 1
+        if gathers[0] == 2:  # the second round's gather: as a user's Ctrl-C would come
+            os.kill(os.getpid(), signal.SIGINT)
+        return original(*args, **kwargs)
+
+    monkeypatch.setattr(adaptive, "_gather", gather)
+    out = tmp_path / "cut"
+    argv = ["render", str(scene), "-o", str(out), "--receivers", "800", "--patches", "60"]
+    status, _, err = run_cli([*argv, "-q"], capsys)
+    monkeypatch.setattr(adaptive, "_gather", original)
+    assert status == 130, err
+    report = json.loads((out / "report.json").read_text())
+    assert report["solve"]["stop_reason"] == "converged" and report["refinement"]["stopped"]
+    assert report["refinement"]["rounds"] == 1
+    assert (out / "cornell-box.checkpoint.npz").is_file()
+    assert (out / "cornell-box.refinement.npz").is_file()
+    status, _, err = run_cli([*argv, "-q", "--resume"], capsys)
+    assert status == 0, err
+    resumed = json.loads((out / "report.json").read_text())
+    assert resumed["resumed"]["shots"] == report["solve"]["shots"] == resumed["solve"]["shots"]
+    assert resumed["resumed"]["form_factor_columns"] == 0  # the pass was traced again
+    assert not resumed["refinement"]["stopped"]
+    assert not (out / "cornell-box.checkpoint.npz").exists()
+    assert not (out / "cornell-box.refinement.npz").exists()
+    _, _, got = read_radiosity_ply(out / "cornell-box.ply")
+    _, _, want = read_radiosity_ply(tmp_path / "straight" / "cornell-box.ply")
+    np.testing.assert_array_equal(got, want)
+
+
 def test_a_cut_refinement_resumes_from_its_last_round(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:

@@ -143,8 +143,8 @@ def _render(args: argparse.Namespace) -> int:
     settings = render_settings(args, args.method)
     progress = _Progress(enabled=not args.quiet)
     stop = StopFlag(
-        "stopping after the current column or shot, then writing the results and a "
-        "checkpoint (Ctrl-C again to abort)"
+        "stopping after the current column, shot or refinement patch, then writing the "
+        "results and a checkpoint (Ctrl-C again to abort)"
     )
     try:
         with stopping_on_signals(stop), _log_above(progress.enabled):
@@ -163,7 +163,7 @@ def _render(args: argparse.Namespace) -> int:
         progress.close()
     if not args.quiet:
         _print_summary(outcome.report, outcome.outputs)
-    if outcome.result.stop_reason == "interrupted":
+    if outcome.result.stop_reason == "interrupted" or stop.signum:  # in refinement too
         return 128 + (stop.signum or signal.SIGINT)  # 130 for Ctrl-C, 143 for SIGTERM
     return 0
 
