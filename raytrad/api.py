@@ -10,7 +10,7 @@ import logging
 import os
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, Literal
 
@@ -262,8 +262,7 @@ def render(
             logs.append(monitor.log)
             on_shot = shot_hook(monitor, progress, settings, save)
             with timed(timings, "solve"):
-                resumed = state.seconds if state else 0
-                solve_settings = budget.solve_settings(settings.solve, resumed)
+                solve_settings = budget.solve_settings(settings.solve, getattr(state, "seconds", 0))
                 result = solve_system(
                     prepared.mesh, prepared.engine, solve_settings, state, on_shot, stop
                 )
@@ -288,8 +287,10 @@ def render(
                 if plot:
                     outputs["plot"] = output_dir / "convergence.png"
                     plot_convergence(outputs["plot"], {result.method: error_log}, str(scene_path))
-            if refinement.stopped and not saved:  # Ctrl-C while refining: the solve, its rounds
-                save(result.state)  # (the columns are released: --resume traces the pass)
+            if refinement.stopped and stop is not None and stop():  # Ctrl-C while refining
+                result = replace(result, stop_reason="interrupted")
+            if refinement.stopped and not saved:  # no time limit: the columns are released
+                save(result.state)  # the solved state, its rounds beside it (README: resume)
             keep = refinement.stopped or (saved and result.stop_reason in RESUMABLE)
             outputs |= resuming.keep_checkpoint(checkpoint, keep, refinement, key, solution)
             report = build_report(scene_path, baked, result, settings, timings, outputs)
@@ -297,10 +298,8 @@ def render(
             add_error_log(report, error_log, ref)
             add_total_error(report, error_log, error, refinement, solved.mesh.receiver_count)
             write_report(outputs.setdefault("report", output_dir / "report.json"), report)
-            made_from = run_manifest.content_key(loaded, settings)  # the manifest goes last
-            outputs["manifest"] = run_manifest.write_manifest(
-                output_dir, outputs, report, made_from
-            )
+            made = run_manifest.content_key(loaded, settings)  # the manifest goes last
+            outputs["manifest"] = run_manifest.write_manifest(output_dir, outputs, report, made)
         finally:
             prepared.close()
     return RenderOutcome(result, baked, outputs, report, error_log, refinement, error)

@@ -324,7 +324,7 @@ def test_a_time_limited_refinement_resumes_without_pass_or_solve(
     """A time-limited run whose refinement is cut keeps a checkpoint of the converged
     solve with every column: ``--resume`` traces no pass, shoots no shot, refines to the
     end and gives the uninterrupted bake."""
-    from raytrad.core import adaptive
+    from raytrad.core import adaptive, pipeline
 
     scene = SCENES / "cornell-box.obj"
     settings = RenderSettings(
@@ -339,9 +339,12 @@ def test_a_time_limited_refinement_resumes_without_pass_or_solve(
         return original(*args, **kwargs)
 
     monkeypatch.setattr(adaptive, "_gather", gather)
+    spent = pipeline.RunBudget.__call__
+    monkeypatch.setattr(pipeline.RunBudget, "__call__", lambda budget: gathering[0])
     out = tmp_path / "cut"
-    first = api.render(scene, out, settings, stop=lambda: gathering[0])
+    first = api.render(scene, out, settings)
     monkeypatch.setattr(adaptive, "_gather", original)
+    monkeypatch.setattr(pipeline.RunBudget, "__call__", spent)
     assert first.result.stop_reason == "converged" and first.refinement.stopped
     assert first.outputs["checkpoint"].is_file()
     # the round cut short added receivers it did not gather, and the summary says so
@@ -402,7 +405,8 @@ def test_ctrl_c_while_refining_keeps_the_solve_and_its_rounds(
     monkeypatch.setattr(adaptive, "_gather", original)
     assert status == 130, err
     report = json.loads((out / "report.json").read_text())
-    assert report["solve"]["stop_reason"] == "converged" and report["refinement"]["stopped"]
+    assert report["solve"]["stop_reason"] == "interrupted" and report["refinement"]["stopped"]
+    assert any("interrupted" in line for line in api.verify_outputs(out))
     assert report["refinement"]["rounds"] == 1
     assert (out / "cornell-box.checkpoint.npz").is_file()
     assert (out / "cornell-box.refinement.npz").is_file()
