@@ -407,6 +407,9 @@ def test_ctrl_c_while_refining_keeps_the_solve_and_its_rounds(
     report = json.loads((out / "report.json").read_text())
     assert report["solve"]["stop_reason"] == "interrupted" and report["refinement"]["stopped"]
     assert any("interrupted" in line for line in api.verify_outputs(out))
+    _print_summary(report, {})
+    summary = capsys.readouterr().out
+    assert "converged after" in summary and "(then interrupted while refining)" in summary
     assert report["refinement"]["rounds"] == 1
     assert (out / "cornell-box.checkpoint.npz").is_file()
     assert (out / "cornell-box.refinement.npz").is_file()

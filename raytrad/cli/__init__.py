@@ -204,14 +204,25 @@ def _solved(report: dict[str, Any]) -> str:
     return f" ({refinement['receivers_solved']} solved, the rest added by refinement)"
 
 
+def _solve_end(report: dict[str, Any]) -> str:
+    """How the solve ended, after how many shots: a converged solve whose refinement a
+    signal cut short (``interrupted`` in the report) says it converged first."""
+    s, refinement = report["solve"], report.get("refinement") or {}
+    tolerance = report.get("settings", {}).get("solve", {}).get("tolerance", 0.0)
+    line = f"{{}} after {s['shots']} shots, residual {s['residual']:.2e}"
+    if s["stop_reason"] == "interrupted" and refinement.get("stopped"):
+        if s["residual"] <= tolerance:
+            return line.format("converged") + " (then interrupted while refining)"
+    return line.format(s["stop_reason"])
+
+
 def _print_summary(report: dict[str, Any], outputs: dict[str, Path]) -> None:
     s, stats, t = report["solve"], report["statistics"], report["timings_seconds"]
     total = sum(t.values())
     lines = [
         f"scene      {report['scene']}: {stats['receivers']} receivers{_solved(report)}, "
         f"{stats['patches']} patches, {stats['subareas']} sample points",
-        f"solve      {s['method']}: {s['stop_reason']} after {s['shots']} shots, "
-        f"residual {s['residual']:.2e}",
+        f"solve      {s['method']}: {_solve_end(report)}",
         f"rays       {s['rays']} in the form-factor pass"
         + (" of this run" if report.get("resumed") else "")
         + (
