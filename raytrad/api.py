@@ -275,6 +275,7 @@ def render(
             check_output_range(result.radiosity, scene_path)
             solved, solution = prepared, result.radiosity
             rounds = resuming.kept_refinement(checkpoint, key, solution) if state else None
+            taken = resuming.taken_rounds(taken, rounds, settings.refine)
             with timed(timings, "refine"):
                 baked, result, refinement = pipeline.refine_solution(
                     prepared, result, settings.refine, budget, rounds

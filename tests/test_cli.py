@@ -418,6 +418,7 @@ def test_ctrl_c_while_refining_keeps_the_solve_and_its_rounds(
     resumed = json.loads((out / "report.json").read_text())
     assert resumed["resumed"]["shots"] == report["solve"]["shots"] == resumed["solve"]["shots"]
     assert resumed["resumed"]["form_factor_columns"] == 0  # the pass was traced again
+    assert resumed["resumed"]["refinement_rounds"] == 1
     assert not resumed["refinement"]["stopped"]
     assert not (out / "cornell-box.checkpoint.npz").exists()
     assert not (out / "cornell-box.refinement.npz").exists()
@@ -459,13 +460,14 @@ def test_a_cut_refinement_resumes_from_its_last_round(
         rounds.append(cut.refinement.rounds)
         written.append(checkpoint.stat().st_mtime_ns)
     assert rounds == [1, 2]  # the resume went on from round 1
+    assert cut.report["resumed"]["refinement_rounds"] == 1
     # its solve had converged: the checkpoint already held its state and every column
     assert written[1] == written[0] and "checkpoint" not in cut.report["timings_seconds"]
     # rounds made under other refinement settings are not gone on from
     other = dataclasses.replace(settings, refine=RefineSettings(threshold=0.2))
     gathers[0] = 0
     cut = api.render(scene, out, other, resume=True, stop=lambda: gathers[0] >= 2)
-    assert cut.refinement.rounds == 1
+    assert cut.refinement.rounds == 1 and cut.report["resumed"]["refinement_rounds"] == 0
     last = api.render(scene, out, settings, resume=True)
     assert not last.refinement.stopped and last.refinement.rounds == straight.refinement.rounds
     assert last.refinement.rays == straight.refinement.rays
@@ -496,7 +498,8 @@ def test_a_stop_in_the_form_factor_pass_saves_and_resumes(tmp_path: Path) -> Non
     assert second.result.stop_reason == "converged"
     resumed = json.loads((out / "report.json").read_text())["resumed"]
     columns = report["solve"]["form_factor_columns"]  # those the cut pass finished
-    assert resumed == {"shots": 0, "solve_seconds": 0.0, "form_factor_columns": columns}
+    want = {"shots": 0, "solve_seconds": 0.0, "form_factor_columns": columns}
+    assert resumed == want | {"refinement_rounds": 0}
     assert columns >= 1
     # the columns of the cut pass came from the checkpoint: fewer rays, the same answer
     assert second.result.state.rays < straight.result.state.rays

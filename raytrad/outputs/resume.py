@@ -383,12 +383,24 @@ def resume_facts(
 ) -> dict[str, Any] | None:
     """What a run took from its checkpoint, for ``report.json``'s ``"resumed"``: the
     solve's shots and seconds (0 where the pass was cut short: the solve then starts
-    afresh) and the form-factor columns it did not compute again; None for a run that
-    did not resume."""
+    afresh), the form-factor columns it did not compute again, and the refinement rounds
+    (0 here; :func:`taken_rounds`); None for a run that did not resume."""
     if state is None and not columns:
         return None
     return {
         "shots": state.shots if state is not None else 0,
         "solve_seconds": float(state.seconds) if state is not None else 0.0,
         "form_factor_columns": len(columns["patch"]) if columns else 0,
+        "refinement_rounds": 0,
     }
+
+
+def taken_rounds(
+    taken: dict[str, Any] | None, rounds: Refinement | None, settings: RefineSettings
+) -> dict[str, Any] | None:
+    """``taken`` (:func:`resume_facts`) with the refinement rounds the run goes on from:
+    those ``rounds`` kept (:func:`kept_refinement`) when made with these ``settings``
+    (refinement starts again otherwise)."""
+    if taken is None or rounds is None or rounds.settings != settings:
+        return taken
+    return taken | {"refinement_rounds": rounds.rounds}
