@@ -451,7 +451,8 @@ def _add_common(parser: argparse.ArgumentParser, default_tolerance: float) -> No
         type=float,
         default=RenderSettings().checkpoint_seconds,
         metavar="SECONDS",
-        help="seconds between checkpoints of a long solve (default: %(default)s)",
+        help="seconds between checkpoints of a long form-factor pass or solve "
+        "(default: %(default)s)",
     )
     add("-q", "--quiet", action="store_true", help="no progress bar, only warnings and errors")
     add("-v", "--verbose", action="store_true", help="log details")
