@@ -312,3 +312,40 @@ def test_a_second_ctrl_c_aborts_the_bake(tmp_path: Path) -> None:
         for _ in range(50):
             os.kill(worker, 0)
             time.sleep(0.1)
+
+
+def test_a_job_stopped_while_refining_is_interrupted_and_resumed(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A job a signal stops in its second refinement round is ``interrupted``, not done
+    (it used to count as done, and the next bake skipped its coarser mesh); the next run
+    resumes it from its solve and its round to the uninterrupted bake, and the one after
+    skips it."""
+    from raytrad.batch import jobs
+    from raytrad.core import adaptive
+
+    scene = tmp_path / "cornell.obj"
+    write_obj(cornell_box(), scene)
+    settings = RenderSettings(mesh=MeshSettings(receivers=800, patches=60))
+    straight = api.render(scene, tmp_path / "straight", settings)
+    gathers = [0]
+    original = adaptive._gather
+
+    def gather(*args: object, **kwargs: object) -> object:
+        gathers[0] += 1
+        if gathers[0] == 2:  # as the job's signal handler would set it
+            monkeypatch.setattr(jobs._StopOnSignal, "requested", True)
+        return original(*args, **kwargs)
+
+    monkeypatch.setattr(adaptive, "_gather", gather)
+    job = Job("cornell", scene, tmp_path / "out", settings)
+    first = jobs.run_job(job)
+    assert first.status == "interrupted" and first.stop_reason == "interrupted"
+    assert (tmp_path / "out" / "cornell.checkpoint.npz").is_file()
+    monkeypatch.setattr(jobs._StopOnSignal, "requested", False)
+    monkeypatch.setattr(adaptive, "_gather", original)
+    second = jobs.run_job(job)
+    assert second.status == "done" and second.resumed
+    _, _, got = read_radiosity_ply(tmp_path / "out" / "cornell.ply")
+    np.testing.assert_array_equal(got, straight.result.radiosity.astype(np.float32))
+    assert jobs.run_job(job).status == "skipped"
