@@ -355,7 +355,9 @@ def cluster_means(mesh: RadiosityMesh, corner_share: np.ndarray, tree: Clusters)
     visible_area = visible_areas(mesh, corner_share)
     lengths = np.cumsum(tree.stop - tree.start)
     workers = worker_count()
-    step = min(MEAN_SLOTS, max(MEAN_SLOTS // 64, -(-int(lengths[-1:].sum()) // workers)))
+    slots = int(lengths[-1]) if len(lengths) else 0
+    share = -(-slots // workers)  # a core's share, rounded up
+    step = min(MEAN_SLOTS, max(MEAN_SLOTS // 64, share))
     bounds = [0]
     while bounds[-1] < tree.count:
         first = bounds[-1]
