@@ -215,8 +215,8 @@ def render(
     progress : callable or None
         ``progress(RenderProgress)`` after each shot.
     stop : callable or None
-        Polled after each column of the pass, shot and patch of a refinement round; True
-        stops there and writes the outputs so far and a checkpoint to resume from.
+        Polled after each column of the pass, before each shot and after each patch of a
+        refinement round; True stops there, writes the outputs so far and a checkpoint.
     reference : str or None
         Measure the true error against this reference (see :func:`make_reference`).
     plot : bool
