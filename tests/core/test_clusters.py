@@ -207,7 +207,8 @@ def test_cluster_means_do_not_depend_on_batches_or_threads(
     """Means built in one batch, in many small ones on one thread and on two threads are
     the same to the bit (each node's sums are its own)."""
     mesh, _ = clustered
-    whole = subarea_means(mesh)
+    monkeypatch.setenv("RAYTRAD_THREADS", "1")
+    whole = subarea_means(mesh)  # one batch: the tree holds fewer than MEAN_SLOTS slots
     for threads, slots in (("1", 64), ("2", 64), ("2", 1 << 18)):
         monkeypatch.setenv("RAYTRAD_THREADS", threads)
         monkeypatch.setattr(gather, "MEAN_SLOTS", slots)
