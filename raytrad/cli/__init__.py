@@ -163,7 +163,7 @@ def _render(args: argparse.Namespace) -> int:
         progress.close()
     if not args.quiet:
         _print_summary(outcome.report, outcome.outputs)
-    if outcome.result.stop_reason == "interrupted" or stop.signum:  # in refinement too
+    if outcome.result.stop_reason == "interrupted" or stop.signum:  # or came after refinement
         return 128 + (stop.signum or signal.SIGINT)  # 130 for Ctrl-C, 143 for SIGTERM
     return 0
 

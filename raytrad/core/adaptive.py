@@ -153,6 +153,13 @@ class Refinement:
     settings: RefineSettings | None = field(default=None, repr=False)
 
 
+def goes_on_from(start: Refinement, settings: RefineSettings) -> bool:
+    """Whether :func:`refine_adaptively` under ``settings`` goes on from the rounds of
+    ``start`` (an earlier refinement's ``resumable`` part): they were made with the same
+    settings; otherwise it starts again."""
+    return start.settings == settings
+
+
 def refine_adaptively(
     scene: Scene,
     mesh: RadiosityMesh,
@@ -188,10 +195,10 @@ def refine_adaptively(
     """
     budget = settings.max_receivers or 2 * mesh.receiver_count
     out = Refinement(mesh, np.asarray(radiosity, dtype=np.float64), settings=settings)
-    if start is not None and start.settings != settings:
-        log.warning("the refinement rounds kept were made with other settings: starting again")
-    elif start is not None:
+    if start is not None and goes_on_from(start, settings):
         out = replace(start, stopped=False, interpolated=0, resumable=None)
+    elif start is not None:
+        log.warning("the refinement rounds kept were made with other settings: starting again")
     if settings.threshold <= 0:
         return out
     if budget <= mesh.receiver_count:

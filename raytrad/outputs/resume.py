@@ -19,7 +19,7 @@ from typing import Any
 
 import numpy as np
 
-from raytrad.core.adaptive import Refinement, RefineSettings
+from raytrad.core.adaptive import Refinement, RefineSettings, goes_on_from
 from raytrad.core.convergence import ErrorLog
 from raytrad.core.mesh import RadiosityMesh
 from raytrad.core.solver import SolverState
@@ -400,7 +400,7 @@ def taken_rounds(
 ) -> dict[str, Any] | None:
     """``taken`` (:func:`resume_facts`) with the refinement rounds the run goes on from:
     those ``rounds`` kept (:func:`kept_refinement`) when made with these ``settings``
-    (refinement starts again otherwise)."""
-    if taken is None or rounds is None or rounds.settings != settings:
+    (:func:`~raytrad.core.adaptive.goes_on_from`; refinement starts again otherwise)."""
+    if taken is None or rounds is None or not goes_on_from(rounds, settings):
         return taken
     return taken | {"refinement_rounds": rounds.rounds}
