@@ -429,11 +429,12 @@ def surface_receivers(
     distinct, inverse = np.unique(key, return_inverse=True)
     inverse = inverse.reshape(-1)
     count = len(distinct)
-    third = np.repeat(area / 3.0, 3)
+    triangle_third = area / 3.0
+    third = np.repeat(triangle_third, 3)
     r_area = np.bincount(inverse, weights=third, minlength=count)
     r_normal = np.zeros((count, 3))
     for k in range(3):  # each corner's normal times its third: the triangle's, repeated
-        weights = np.repeat(normal[:, k] * (area / 3.0), 3)
+        weights = np.repeat(normal[:, k] * triangle_third, 3)
         r_normal[:, k] = np.bincount(inverse, weights=weights, minlength=count)
     # The inward point is the centroid of the receiver's largest own triangle, not a mean:
     # where a fin meets a wall, the mean of the triangles on both sides of the fin lies in
