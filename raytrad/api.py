@@ -34,7 +34,7 @@ from raytrad.outputs.comparison import markdown_table, write_comparison
 from raytrad.outputs.plot import plot_convergence
 from raytrad.outputs.progress import RenderProgress, pass_hook, shot_hook
 from raytrad.outputs.report import add_error_log, add_total_error, build_report, write_report
-from raytrad.outputs.resume import checkpoint_path, fingerprint, resume_point, save_state
+from raytrad.outputs.resume import checkpoint_path, fingerprint, resume_point
 from raytrad.outputs.run_lock import RunLock
 from raytrad.outputs.run_manifest import verify_outputs
 from raytrad.outputs.write import check_output_range, write_outputs
@@ -87,12 +87,15 @@ def prepare(
     stop: StopPoll = None,
     columns: Any = None,
     on_column: Any = None,
+    balanced: Any = None,
 ) -> Prepared:
     """Repair, mesh and balance ``scene`` (:func:`raytrad.core.pipeline.prepare`: ``stop``
     cuts the form-factor pass short, ``columns`` of an earlier one are reused,
-    ``on_column(mesh, engine)`` follows each column)."""
+    ``on_column(mesh, engine)`` follows each column, ``balanced`` scales of a finished
+    one stand in for it)."""
     settings = settings or RenderSettings()
-    return pipeline.prepare(scene, settings.mesh, settings.cache_mb, stop, columns, on_column)
+    mesh, cache = settings.mesh, settings.cache_mb
+    return pipeline.prepare(scene, mesh, cache, stop, columns, on_column, balanced)
 
 
 def solve(
@@ -240,17 +243,19 @@ def render(
     with RunLock(output_dir):  # one run at a time in a folder
         key = fingerprint(loaded.scene, settings.system_settings())
         checkpoint = checkpoint_path(output_dir, scene_path.stem)
-        strict = resume is True
-        state, columns, history = resume_point(checkpoint, key, strict) if resume else (None,) * 3
-        taken = resuming.resume_facts(state, columns)  # before the solve moves ``state`` on
+        point = resume_point(checkpoint, key, resume is True) if resume else resuming.ResumePoint()
+        state, columns = point.state, point.columns
+        taken = resuming.resume_facts(state, columns, point.scales)  # before the solve
         logs: list[ErrorLog] = []  # the solve's error log, saved with its state
 
         def save(state: SolverState, engine: Any = None, whole: bool = False) -> None:
-            parts = (engine or prepared.engine).pass_column_parts(whole)  # a pass's columns
-            save_state(checkpoint, state, key, parts, whole, logs[0] if logs else None)
+            engine = engine or prepared.engine  # a pass's columns, a finished one's scales
+            balance = prepared.balance if engine.complete else None
+            history = logs[0] if logs else None
+            resuming.save_run(checkpoint, state, key, engine, whole, history, balance)
 
         on_column = pass_hook(save, settings.checkpoint_seconds, budget.measured)  # saved too
-        prepared = prepare(loaded.scene, settings, budget, columns, on_column)
+        prepared = prepare(loaded.scene, settings, budget, columns, on_column, point.scales)
         timings.update(prepared.timings)
 
         try:
@@ -258,7 +263,7 @@ def render(
             if reference is not None:
                 with timed(timings, "reference"):
                     ref = make_reference(reference, prepared)
-            monitor = ConvergenceMonitor(prepared.mesh, prepared.engine, ref, history)
+            monitor = ConvergenceMonitor(prepared.mesh, prepared.engine, ref, point.history)
             logs.append(monitor.log)
             on_shot = shot_hook(monitor, progress, settings, save)
             with timed(timings, "solve"):

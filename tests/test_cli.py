@@ -378,9 +378,9 @@ def test_ctrl_c_while_refining_keeps_the_solve_and_its_rounds(
 ) -> None:
     """Ctrl-C in the second refinement round of a run without a time limit (so no
     checkpoint was written after the solve, and refinement released the columns): the
-    run exits 130 with the bake so far, the solve's state and the finished round; --resume
-    traces the pass again but shoots nothing, goes on from that round and gives the
-    uninterrupted bake, leaving no checkpoint."""
+    run exits 130 with the bake so far, the solve's state, the pass's balanced scales and
+    the finished round; --resume traces no pass and shoots nothing, goes on from that
+    round and gives the uninterrupted bake, leaving no checkpoint."""
     import os
 
     from raytrad.core import adaptive
@@ -417,7 +417,16 @@ def test_ctrl_c_while_refining_keeps_the_solve_and_its_rounds(
     assert status == 0, err
     resumed = json.loads((out / "report.json").read_text())
     assert resumed["resumed"]["shots"] == report["solve"]["shots"] == resumed["solve"]["shots"]
-    assert resumed["resumed"]["form_factor_columns"] == 0  # the pass was traced again
+    # the pass's balanced scales came back with the state: no pass, no column, no ray
+    assert resumed["resumed"]["form_factor_scales"]
+    assert resumed["resumed"]["form_factor_columns"] == 0
+    assert resumed["solve"]["form_factor_columns"] == resumed["solve"]["rays"] == 0
+    balance = report["statistics"]["form_factor_balance"]
+    assert resumed["statistics"]["form_factor_balance"] == balance and balance["complete"]
+    _print_summary(resumed, {})
+    assert "rays       0 in the form-factor pass of this run (the finished pass's balanced" in (
+        capsys.readouterr().out
+    )
     assert resumed["resumed"]["refinement_rounds"] == 1
     assert not resumed["refinement"]["stopped"]
     assert not (out / "cornell-box.checkpoint.npz").exists()
@@ -499,7 +508,7 @@ def test_a_stop_in_the_form_factor_pass_saves_and_resumes(tmp_path: Path) -> Non
     resumed = json.loads((out / "report.json").read_text())["resumed"]
     columns = report["solve"]["form_factor_columns"]  # those the cut pass finished
     want = {"shots": 0, "solve_seconds": 0.0, "form_factor_columns": columns}
-    assert resumed == want | {"refinement_rounds": 0}
+    assert resumed == want | {"form_factor_scales": False, "refinement_rounds": 0}
     assert columns >= 1
     # the columns of the cut pass came from the checkpoint: fewer rays, the same answer
     assert second.result.state.rays < straight.result.state.rays

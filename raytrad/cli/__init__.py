@@ -172,6 +172,13 @@ def _share(part: int, whole: int) -> str:
     return f"{100.0 * part / whole:.0f}%" if whole else "-"
 
 
+def _taken_pass(taken: dict[str, Any]) -> str:
+    """What a resumed run that traced nothing took of its pass from the checkpoint."""
+    if taken.get("form_factor_scales") and not taken.get("form_factor_columns"):
+        return " (the finished pass's balanced scales came from the checkpoint)"
+    return " (every column came from the checkpoint)"
+
+
 def _naive(rays: int, naive: int) -> str:
     """``rays`` against the naive count: seeing (receiver, patch) pairs x sample points
     (more than 100 % where many pairs are near: near sub-areas are traced per triangle)."""
@@ -228,7 +235,7 @@ def _print_summary(report: dict[str, Any], outputs: dict[str, Path]) -> None:
         + (
             " (nothing can occlude, no rays needed)"
             if not stats["occlusion_tested"]
-            else " (every column came from the checkpoint)"
+            else _taken_pass(report["resumed"])
             if report.get("resumed") and not s["rays_naive"]
             else f" ({s['rays_per_second']:.3g} rays/s; {_naive(s['rays'], s['rays_naive'])})"
         ),

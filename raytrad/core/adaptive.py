@@ -5,7 +5,7 @@ threshold (relative to its own level, with a floor at a fraction of the scene's 
 that noise in the dark does not count) is split, conformingly: the longest-edge closure of
 :func:`raytrad.core.refine.refine` splits neighbours as needed, so no T-junction appears.
 The new receivers get their radiosity by a final gather over the solve's shooting patches
-(:meth:`~raytrad.core.formfactor.FormFactorEngine.gather_at`: their own visibility rays,
+(:meth:`~raytrad.core.formfactor.FormFactorEngine.gather_rows`: their own visibility rays,
 the patches' converged radiosity, the near field as it varies across a patch). Shadow
 boundaries, contact lines and the surroundings of lamps are refined; flat regions are not.
 From the second round on, a triangle is also split when a corner the last round added
@@ -458,7 +458,7 @@ def final_gather(
     """Radiosity at surface points gathered from a solution, and which points are hidden.
 
     ``B(x) = E + rho sum_p F(x <- p) (B̄_p + [B̃_xp - B̄_p])``
-    (:meth:`~raytrad.core.formfactor.FormFactorEngine.gather_at`); a point that sees
+    (:meth:`~raytrad.core.formfactor.FormFactorEngine.gather_rows`); a point that sees
     surfaces all round (probe rays) has its factors summed to 1 as balancing does; a
     point shut in (under a block) keeps its emission, and so does a point of zero
     reflectance: neither gets a factor or a ray.

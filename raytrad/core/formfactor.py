@@ -43,7 +43,6 @@ from raytrad.core.gather import (
     GatherRows,
     GatherWeights,
     SubareaMeans,
-    gathered_irradiance,
     join_gathers,
 )
 from raytrad.core.mesh import RadiosityMesh
@@ -64,6 +63,9 @@ EXACT_ROW_SUM = 1e-6
 AHEAD_PER_WORKER = 2
 
 
+#: The arrays of :meth:`FormFactorEngine.balanced_scales`: a value per receiver (0) or
+#: per patch (1) each.
+BALANCED_SCALES = dict(row_scale=0, row_sums=0, closed_rows=0, column_scale=1, short_patches=1)
 #: What :meth:`FormFactorEngine.balance` reports when the pass was cut short.
 _UNBALANCED: dict[str, float | bool | str] = {
     "closed_rows": 0,
@@ -451,14 +453,45 @@ class FormFactorEngine:
         found = balance_streamed(
             columns, mesh.receiver_area, mesh.patch_area, fix_rows, closed_patch, iterations
         )
-        self._row_scale = found.row_scale
-        self._col_scale = found.column_scale
-        self.complete = True
-        self._final_rows = found.row_sums
-        self.closed_rows = np.asarray(closed, dtype=bool)
-        self.max_row_sum = float(self._final_rows.max(initial=0.0))
-        self.short_patches = found.short(closed_patch)
+        short = found.short(closed_patch)
+        self.restore_balance(
+            {"row_scale": found.row_scale, "column_scale": found.column_scale}
+            | {"row_sums": found.row_sums, "closed_rows": closed, "short_patches": short}
+        )
         return found.summary(sums, fix_rows, closed_patch, mesh.patch_area)
+
+    def balanced_scales(self) -> dict[str, np.ndarray]:
+        """What :meth:`balance` found, as arrays for a checkpoint ({} before it): the (R,)
+        ``row_scale``, ``row_sums`` and ``closed_rows`` and the (P,) ``column_scale`` and
+        ``short_patches``. An engine given them by :meth:`restore_balance` shoots, gathers
+        and refines as this one does, without a pass."""
+        arrays = (self._row_scale, self._final_rows, self.closed_rows, self._col_scale)
+        if not self.complete or any(a is None for a in arrays):
+            return {}
+        names = ("row_scale", "row_sums", "closed_rows", "column_scale")
+        found = {n: a for n, a in zip(names, arrays, strict=True) if a is not None}
+        return found | {"short_patches": self.short_patches}
+
+    def restore_balance(self, scales: Mapping[str, np.ndarray]) -> None:
+        """Take balancing's result (:meth:`balanced_scales`) instead of a pass: the engine
+        is complete, and computes a column only when one is asked for, balanced by these.
+
+        Raises
+        ------
+        KeyError, ValueError
+            An array is missing, or of another mesh's size.
+        """
+        counts = (self.mesh.receiver_count, self.mesh.patch_count)
+        arrays = {name: np.asarray(scales[name]) for name in BALANCED_SCALES}
+        if any(arrays[n].shape != (counts[k],) for n, k in BALANCED_SCALES.items()):
+            raise ValueError("the balanced scales are of another mesh")
+        self._row_scale = arrays["row_scale"].astype(np.float64)
+        self._col_scale = arrays["column_scale"].astype(np.float64)
+        self._final_rows = arrays["row_sums"].astype(np.float64)
+        self.closed_rows = arrays["closed_rows"].astype(bool)
+        self.short_patches = arrays["short_patches"].astype(bool)
+        self.max_row_sum = float(self._final_rows.max(initial=0.0))
+        self.complete = True
 
     def row_sums(self) -> np.ndarray:
         """(R,) sum_p F_jp of the balanced factors (the raw ones before :meth:`balance`)."""
@@ -514,44 +547,12 @@ class FormFactorEngine:
     def refined(self, mesh: RadiosityMesh) -> FormFactorEngine:
         """An engine on a refinement of this one's mesh (the same patches and sub-areas,
         finer triangles and more receivers), with this one's balanced column scales, for
-        gathering at new receivers (:meth:`gather_at`). It caches no column."""
+        gathering at new receivers (:meth:`gather_rows`). It caches no column."""
         engine = FormFactorEngine(
             mesh, self.occluder, cache_bytes=0, cull=self.cull, pairs=self._pairs
         )
         engine._col_scale = self._col_scale.copy()
         return engine
-
-    def gather_at(
-        self,
-        points: np.ndarray,
-        normals: np.ndarray,
-        radiosity: np.ndarray,
-        patch_radiosity: np.ndarray,
-    ) -> tuple[np.ndarray, np.ndarray]:
-        """Irradiance at new points gathered from a solution: a final gather.
-
-        ``H(x) = sum_p F(x <- p) (B̄_p + [B̃_xp - B̄_p])`` with the balanced column scales,
-        the near-field bracket where ``x`` is near ``p`` (:mod:`raytrad.core.gather`).
-        Equal to ``gathered_irradiance(gather_rows(points, normals), ...)``.
-
-        Parameters
-        ----------
-        points : (N, 3) float64
-            Where to evaluate [m] (receiver evaluation points, see :func:`receiver_points`).
-        normals : (N, 3) float64
-            Unit normals.
-        radiosity : (R, 3) float64
-            The solution at this engine's receivers [W m-2].
-        patch_radiosity : (P, 3) float64
-            Its patch means [W m-2].
-
-        Returns
-        -------
-        irradiance : (N, 3) float64 [W m-2]
-        row_sum : (N,) float64, sum_p F(x <- p) [1] (before any row scaling)
-        """
-        rows = self.gather_rows(points, normals)
-        return gathered_irradiance(rows, radiosity, patch_radiosity), rows.row_sum
 
     @overload
     def gather_rows(self, points: np.ndarray, normals: np.ndarray) -> GatherRows: ...

@@ -126,6 +126,7 @@ def prepare(
     stop: Callable[[], bool] | None = None,
     columns: Mapping[str, Any] | None = None,
     on_column: Callable[[RadiosityMesh, FormFactorEngine], None] | None = None,
+    balanced: tuple[Mapping[str, np.ndarray], dict[str, Any]] | None = None,
 ) -> Prepared:
     """Repair, mesh and balance ``scene``: everything before the first shot.
 
@@ -149,6 +150,10 @@ def prepare(
     on_column : callable or None
         ``on_column(mesh, engine)`` after each column the pass computes, in the calling
         thread (to checkpoint a long pass).
+    balanced : (scales, summary) or None
+        A finished pass's balanced scales and balancing's summary, from a checkpoint
+        (:meth:`FormFactorEngine.balanced_scales`): no pass is traced, and a column is
+        computed only when a shot asks for it.
 
     Raises
     ------
@@ -187,6 +192,10 @@ def prepare(
             log.info(
                 "form factors: %d columns from the checkpoint", engine.restore_columns(columns)
             )
+        if balanced is not None:
+            engine.restore_balance(balanced[0])
+            log.info("form factors: the balanced scales of the finished pass, from the checkpoint")
+            return Prepared(scene, mesh, engine, occluder, timings, closed, dict(balanced[1]))
         progress = _pass_progress(column_weights(mesh, engine.pass_order()))
 
         def column_done(done: int, total: int) -> None:

@@ -15,12 +15,13 @@ import logging
 import os
 from collections.abc import Iterable
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
 from raytrad.core.adaptive import Refinement, RefineSettings, goes_on_from
 from raytrad.core.convergence import ErrorLog
+from raytrad.core.formfactor import BALANCED_SCALES, FormFactorEngine
 from raytrad.core.mesh import RadiosityMesh
 from raytrad.core.solver import SolverState
 from raytrad.errors import RaytradError
@@ -36,6 +37,30 @@ LAYOUT = 5  # 4: gather sources beyond the receivers are cluster-tree nodes; 5: 
 PASS = "pass_"
 #: Prefix of the arrays holding a refinement's mesh (:func:`save_refinement`).
 MESH = "mesh_"
+#: Prefix of the arrays holding a finished pass's balanced scales (:class:`SavedScales`).
+SCALES = "balanced_"
+
+
+class SavedScales(NamedTuple):
+    """A finished form-factor pass as a checkpoint keeps it without its columns: the
+    balanced ``scales``
+    (:meth:`~raytrad.core.formfactor.FormFactorEngine.balanced_scales`) and the
+    ``summary`` of what balancing did. A resume builds its engine from them
+    (:meth:`~raytrad.core.formfactor.FormFactorEngine.restore_balance`) and traces no
+    pass: refinement needs only the scales, and a shot that needs a column computes it."""
+
+    scales: dict[str, np.ndarray]
+    summary: dict[str, Any]
+
+
+class ResumePoint(NamedTuple):
+    """What ``--resume`` continues from (:func:`resume_point`); None where the checkpoint
+    has nothing of it, every field without a checkpoint."""
+
+    state: SolverState | None = None
+    columns: dict[str, Any] | None = None
+    history: ErrorLog | None = None
+    scales: SavedScales | None = None
 
 
 def fingerprint(scene: Scene, system_settings: dict[str, Any]) -> dict[str, Any]:
@@ -59,6 +84,7 @@ def save_state(
     columns: dict[str, np.ndarray] | Iterable[dict[str, np.ndarray]] | None = None,
     whole_pass: bool = False,
     history: ErrorLog | None = None,
+    scales: SavedScales | None = None,
 ) -> None:
     """Write ``state``, its fingerprint ``key`` and the ``columns`` of a form-factor pass
     (cut short, or whole under a solve cut short) to ``path`` atomically: packed
@@ -67,12 +93,17 @@ def save_state(
     disk first (:class:`~raytrad.formats.checkpoint.Spool`) so that no more than a
     column is held at once. ``whole_pass``: the columns are every column of a finished
     pass, and ``state`` was shot through them (:func:`resume_point` keeps both).
-    ``history``: the solve's error log so far, which the resumed run's report goes on."""
+    ``history``: the solve's error log so far, which the resumed run's report goes on.
+    ``scales``: the finished pass's balanced scales (a few arrays the size of the
+    receivers), with which a resume needs no pass."""
     state_arrays, scalars = state.to_record()
     arrays: dict[str, Any] = dict(state_arrays)
     record = {"fingerprint": key, "scalars": scalars, "whole_pass": whole_pass}
     if history is not None:
         record["history"] = history.as_dict()
+    if scales is not None and scales.scales:
+        arrays |= {SCALES + name: values for name, values in scales.scales.items()}
+        record["balance"] = scales.summary
     if columns is None or isinstance(columns, dict):
         arrays |= {PASS + name: values for name, values in (columns or {}).items()}
         write_checkpoint(path, arrays, record)
@@ -84,12 +115,29 @@ def save_state(
         write_checkpoint(path, arrays, record)
 
 
-def resume_point(
-    path: Path, key: dict[str, Any], strict: bool = True
-) -> tuple[SolverState | None, dict[str, Any] | None, ErrorLog | None]:
+def save_run(
+    path: str | os.PathLike[str],
+    state: SolverState,
+    key: dict[str, Any],
+    engine: FormFactorEngine,
+    whole_pass: bool = False,
+    history: ErrorLog | None = None,
+    balance: dict[str, Any] | None = None,
+) -> None:
+    """:func:`save_state` with what a run's ``engine`` holds: the columns of its pass (cut
+    short; every one with ``whole_pass``) and, once the pass is balanced, its scales with
+    ``balance``, balancing's summary (:class:`SavedScales`)."""
+    done = engine.balanced_scales()
+    scales = SavedScales(done, dict(balance or {})) if done else None
+    columns = engine.pass_column_parts(whole_pass)
+    save_state(path, state, key, columns, whole_pass, history, scales)
+
+
+def resume_point(path: Path, key: dict[str, Any], strict: bool = True) -> ResumePoint:
     """What ``--resume`` continues from: the saved solver state, the columns of a
-    form-factor pass cut short and the error log of the solve so far ((None, None, None)
-    without a checkpoint; the log None when the checkpoint has none, or an unreadable one).
+    form-factor pass cut short, the error log of the solve so far and the balanced scales
+    of a finished pass (:class:`ResumePoint`; every field None without a checkpoint; the
+    log None when the checkpoint has none, or an unreadable one).
 
     With ``strict`` False (batch jobs), a checkpoint that does not match or cannot be read
     is passed over with a warning, and the run starts afresh.
@@ -97,32 +145,50 @@ def resume_point(
     A state saved while the pass was incomplete is dropped (None): its shots went through
     factors not yet balanced, so the solve starts again once the pass is done (those were
     only the first, direct-light shots), and a resumed run gives the uninterrupted answer.
-    A solve cut short after the pass saves every column with its state: both come back,
-    and the resume goes on shooting without tracing the pass again.
+    A state saved after the pass comes back with its scales (and every column, when a
+    solve cut short saved them): the resume shoots, or refines, without tracing the pass
+    again.
 
     Raises
     ------
     RaytradError
-        As :func:`load_state`, when ``strict``.
+        As :func:`load_state`, when ``strict``; also when the scales are damaged.
     """
     if not Path(path).exists():
         say = log.warning if strict else log.info  # batch jobs resume whenever they can
         say("%s: no checkpoint to resume from; starting afresh", path)
-        return None, None, None
+        return ResumePoint()
     try:
         arrays, record = read_checkpoint(path, lazy=_LAZY)  # the columns stay on disk
         state = _saved_state(path, arrays, record, key)
         columns, whole = _pass_columns(path, arrays, record)
+        scales = _saved_scales(path, arrays, record, state)
     except RaytradError as exc:
         if strict:
             raise
         log.warning("%s; starting afresh", exc)
-        return None, None, None
+        return ResumePoint()
     if columns and not whole:
         log.info("resuming the form-factor pass from %s: %d columns", path, len(columns["patch"]))
-        return None, columns, None
+        return ResumePoint(columns=columns)
     log.info("resuming from %s at shot %d", path, state.shots)
-    return state, columns or None, _history(path, record)
+    return ResumePoint(state, columns or None, _history(path, record), scales)
+
+
+def _saved_scales(
+    path: str | os.PathLike[str], arrays: dict[str, Any], record: dict[str, Any], state: SolverState
+) -> SavedScales | None:
+    """The balanced scales :func:`save_state` kept in a checkpoint's ``arrays`` and
+    ``record`` (None: it kept none), checked against the sizes of ``state``."""
+    scales = {name[len(SCALES) :]: a for name, a in arrays.items() if name.startswith(SCALES)}
+    if not scales:
+        return None
+    sizes = (len(state.irradiance), len(state.shot))
+    if set(scales) != set(BALANCED_SCALES) or not isinstance(record.get("balance"), dict):
+        raise RaytradError(f"{path}: cannot read checkpoint (its balanced scales are incomplete)")
+    if any(np.shape(scales[n]) != (sizes[k],) for n, k in BALANCED_SCALES.items()):
+        raise RaytradError(f"{path}: cannot read checkpoint (its balanced scales are damaged)")
+    return SavedScales({n: np.asarray(a) for n, a in scales.items()}, record["balance"])
 
 
 def _history(path: str | os.PathLike[str], record: dict[str, Any]) -> ErrorLog | None:
@@ -366,31 +432,33 @@ def solve_digest(radiosity: np.ndarray) -> str:
 
 def unchanged(taken: dict[str, Any] | None, state: SolverState, patches: int) -> bool:
     """Whether the checkpoint a run resumed from (``taken``, :func:`resume_facts`) already
-    holds what the run would save after its solve: every column of the pass (``patches``)
-    and this ``state``'s shots (a solve that had converged, resumed to refine further).
-    Writing it again took 3-4 s of a 20 s limit at 60 000 receivers for the same bytes;
-    otherwise a run under a budget saves every column with its state, so that ``--resume``
-    goes on shooting, or refining, without a pass."""
-    return (
-        taken is not None
-        and taken["form_factor_columns"] == patches
-        and taken["shots"] == state.shots
-    )
+    holds what the run would save after its solve: the whole pass (every column of its
+    ``patches``, or its balanced scales) and this ``state``'s shots (a solve that had
+    converged, resumed to refine further). Writing it again took 3-4 s of a 20 s limit at
+    60 000 receivers for the same bytes; otherwise a run under a budget saves every column
+    with its state, so that ``--resume`` goes on shooting, or refining, without a pass."""
+    if taken is None or taken["shots"] != state.shots:
+        return False
+    return bool(taken["form_factor_columns"] == patches or taken["form_factor_scales"])
 
 
 def resume_facts(
-    state: SolverState | None, columns: dict[str, Any] | None
+    state: SolverState | None,
+    columns: dict[str, Any] | None,
+    scales: SavedScales | None = None,
 ) -> dict[str, Any] | None:
     """What a run took from its checkpoint, for ``report.json``'s ``"resumed"``: the
     solve's shots and seconds (0 where the pass was cut short: the solve then starts
-    afresh), the form-factor columns it did not compute again, and the refinement rounds
-    (0 here; :func:`taken_rounds`); None for a run that did not resume."""
+    afresh), the form-factor columns it did not compute again, whether it took a finished
+    pass's balanced ``scales`` (and traced no pass), and the refinement rounds (0 here;
+    :func:`taken_rounds`); None for a run that did not resume."""
     if state is None and not columns:
         return None
     return {
         "shots": state.shots if state is not None else 0,
         "solve_seconds": float(state.seconds) if state is not None else 0.0,
         "form_factor_columns": len(columns["patch"]) if columns else 0,
+        "form_factor_scales": scales is not None,
         "refinement_rounds": 0,
     }
 

@@ -179,9 +179,9 @@ def test_columns_of_a_cut_pass_round_trip(tmp_path: Path) -> None:
     for name, values in packed.items():
         assert columns[name].dtype == values.dtype, name
         np.testing.assert_array_equal(columns[name], values)
-    state, resumed, history = resume_point(path, key)
+    state, resumed, history, scales = resume_point(path, key)
     assert (
-        state is None and resumed is not None and history is None
+        state is None and resumed is not None and history is None and scales is None
     )  # shots through unbalanced factors: redone
     with prepare(cornell_box(), SETTINGS.mesh, stop=lambda: True, columns=columns) as again:
         # stopped at once: the 5 restored columns, none traced again
@@ -199,6 +199,46 @@ def test_columns_of_a_cut_pass_round_trip(tmp_path: Path) -> None:
         resume_point(path, key)
 
 
+def test_a_finished_pass_resumes_from_its_balanced_scales(tmp_path: Path) -> None:
+    """A checkpoint saved after the pass keeps its balanced scales (a few arrays the size of
+    the receivers, not the columns): an engine restored from them traces no pass, and the
+    columns it computes when asked are the balanced engine's to the bit. Scales of another
+    size, or some missing, are refused with one line naming the file."""
+    from raytrad.core.pipeline import prepare
+    from raytrad.outputs.resume import SavedScales, resume_point, save_run
+
+    key = fingerprint(cornell_box(), SETTINGS.system_settings())
+    path = tmp_path / "s.npz"
+    with prepare(cornell_box(), SETTINGS.mesh) as full:
+        count = full.mesh.receiver_count
+        state = api.solve(full, SETTINGS).state
+        full.engine.release_columns()
+        save_run(path, state, key, full.engine, history=None, balance=full.balance)
+        want = [full.engine.column(p).factors for p in (0, 7, 23)]
+        closed, sums = full.engine.closed_rows, full.engine.row_sums()
+    back, columns, _, scales = resume_point(path, key)
+    assert back is not None and back.shots == state.shots and columns is None
+    assert scales is not None and scales.summary == full.balance
+    assert scales.scales["row_scale"].shape == (count,)
+    with prepare(cornell_box(), SETTINGS.mesh, balanced=scales) as again:
+        engine = again.engine
+        assert engine.columns_computed == 0 and engine.rays_cast == 0 and engine.complete
+        assert again.balance == full.balance
+        np.testing.assert_array_equal(engine.closed_rows, closed)
+        np.testing.assert_array_equal(engine.row_sums(), sums)
+        for p, factors in zip((0, 7, 23), want, strict=True):
+            np.testing.assert_array_equal(engine.column(p).factors, factors)
+    short = {**scales.scales, "row_scale": scales.scales["row_scale"][:-1]}
+    save_state(path, state, key, scales=SavedScales(short, scales.summary))
+    with pytest.raises(RaytradError, match=r"s\.npz: cannot read checkpoint \(its balanced"):
+        resume_point(path, key)
+    missing = {k: v for k, v in scales.scales.items() if k != "column_scale"}
+    save_state(path, state, key, scales=SavedScales(missing, scales.summary))
+    with pytest.raises(RaytradError, match="balanced scales are incomplete"):
+        resume_point(path, key)
+    assert resume_point(path, key, strict=False) == (None, None, None, None)
+
+
 def test_checkpoints_are_written_every_interval(tmp_path: Path) -> None:
     """--checkpoint-every: with a tiny interval the checkpoint exists during the solve (a
     crash then loses at most that much work); a converged run removes it at the end."""
@@ -214,6 +254,36 @@ def test_checkpoints_are_written_every_interval(tmp_path: Path) -> None:
     assert outcome.result.stop_reason == "converged"
     assert len(seen) > 2 and all(seen[1:])  # saved after every shot from the first on
     assert not checkpoint.exists()
+
+
+def test_a_crash_in_the_solve_resumes_without_a_pass(tmp_path: Path) -> None:
+    """A run that dies in its solve (no chance to save) leaves its last periodic
+    checkpoint: the state and the pass's balanced scales, not the columns. The resume
+    traces no pass; each shot computes the column it needs, balanced by those scales, and
+    the bake is the uninterrupted one to the bit."""
+    from raytrad.formats.ply import read_radiosity_ply
+
+    scene = SCENES / "cornell-box.obj"
+    settings = RenderSettings(mesh=MeshSettings(receivers=800, patches=60), checkpoint_seconds=1e-6)
+    straight = api.render(scene, tmp_path / "straight", settings)
+    out = tmp_path / "crashed"
+
+    def crash(report: object) -> None:
+        if getattr(report, "shots", 0) >= 40:
+            raise KeyboardInterrupt  # as a kill would end the process: nothing saved after
+
+    with pytest.raises(KeyboardInterrupt):
+        api.render(scene, out, settings, progress=crash)
+    again = api.render(scene, out, settings, resume=True)
+    taken = again.report["resumed"]
+    assert taken["form_factor_scales"] and taken["form_factor_columns"] == 0
+    assert 0 < taken["shots"] < straight.result.state.shots
+    assert again.result.state.shots == straight.result.state.shots
+    # only the columns the remaining shots needed were computed
+    assert 0 < again.report["solve"]["form_factor_columns"] <= again.prepared.mesh.patch_count
+    _, _, got = read_radiosity_ply(out / "cornell-box.ply")
+    _, _, want = read_radiosity_ply(tmp_path / "straight" / "cornell-box.ply")
+    np.testing.assert_array_equal(got, want)
 
 
 def test_checkpoint_of_the_layout_before_the_cluster_trees_is_refused(tmp_path: Path) -> None:
@@ -245,14 +315,14 @@ def test_the_error_log_round_trips_with_the_state(tmp_path: Path) -> None:
     )
     path = tmp_path / "a.npz"
     save_state(path, _state(1), key, history=history)
-    state, columns, back = resume_point(path, key)
-    assert state is not None and state.shots == 11 and columns is None
+    state, columns, back, scales = resume_point(path, key)
+    assert state is not None and state.shots == 11 and columns is None and scales is None
     assert back == history
     save_state(path, _state(1), key)  # a checkpoint without a log
     assert resume_point(path, key)[2] is None
     broken = ErrorLog(**{**history.__dict__, "residual": [1.0]})  # a column short
     save_state(path, _state(1), key, history=broken)
-    state, _, back = resume_point(path, key)
+    state, _, back, _ = resume_point(path, key)
     assert state is not None and back is None
 
 
