@@ -90,12 +90,10 @@ def prepare(
     balanced: Any = None,
 ) -> Prepared:
     """Repair, mesh and balance ``scene`` (:func:`raytrad.core.pipeline.prepare`: ``stop``
-    cuts the form-factor pass short, ``columns`` of an earlier one are reused,
-    ``on_column(mesh, engine)`` follows each column, ``balanced`` scales of a finished
-    one stand in for it)."""
-    settings = settings or RenderSettings()
-    mesh, cache = settings.mesh, settings.cache_mb
-    return pipeline.prepare(scene, mesh, cache, stop, columns, on_column, balanced)
+    cuts the form-factor pass short, ``columns`` of an earlier one are reused, ``on_column``
+    follows each column, a finished one's ``balanced`` scales stand in for it)."""
+    s = settings or RenderSettings()
+    return pipeline.prepare(scene, s.mesh, s.cache_mb, stop, columns, on_column, balanced)
 
 
 def solve(
@@ -212,9 +210,9 @@ def render(
         What it leaves at None the scene file's ``[output]`` gives (else the defaults).
     resume : bool or "auto"
         Continue from ``<output_dir>/<stem>.checkpoint.npz`` if it exists (refused, naming
-        what changed, when it was made for another scene or other mesh settings; with
-        ``"auto"``, as batch jobs do, such a checkpoint is passed over with a warning);
-        ``report.json``'s ``"resumed"`` says what was taken from it.
+        what changed, if made for another scene or other mesh settings; ``"auto"``, as batch
+        jobs do, passes such a checkpoint over with a warning); ``report.json`` says what
+        it took (``"resumed"``).
     progress : callable or None
         ``progress(RenderProgress)`` after each shot.
     stop : callable or None
@@ -244,18 +242,15 @@ def render(
         key = fingerprint(loaded.scene, settings.system_settings())
         checkpoint = checkpoint_path(output_dir, scene_path.stem)
         point = resume_point(checkpoint, key, resume is True) if resume else resuming.ResumePoint()
-        state, columns = point.state, point.columns
-        taken = resuming.resume_facts(state, columns, point.scales)  # before the solve
+        taken = resuming.resume_facts(point.state, point.columns, point.scales)  # before solve
         logs: list[ErrorLog] = []  # the solve's error log, saved with its state
 
         def save(state: SolverState, engine: Any = None, whole: bool = False) -> None:
             engine = engine or prepared.engine  # a pass's columns, a finished one's scales
-            balance = prepared.balance if engine.complete else None
-            history = logs[0] if logs else None
-            resuming.save_run(checkpoint, state, key, engine, whole, history, balance)
+            resuming.save_run(checkpoint, state, key, engine, whole, logs, lambda: prepared.balance)
 
         on_column = pass_hook(save, settings.checkpoint_seconds, budget.measured)  # saved too
-        prepared = prepare(loaded.scene, settings, budget, columns, on_column, point.scales)
+        prepared = prepare(loaded.scene, settings, budget, point.columns, on_column, point.scales)
         timings.update(prepared.timings)
 
         try:
@@ -267,9 +262,9 @@ def render(
             logs.append(monitor.log)
             on_shot = shot_hook(monitor, progress, settings, save)
             with timed(timings, "solve"):
-                solve_settings = budget.solve_settings(settings.solve, getattr(state, "seconds", 0))
+                limit = budget.solve_settings(settings.solve, getattr(point.state, "seconds", 0))
                 result = solve_system(
-                    prepared.mesh, prepared.engine, solve_settings, state, on_shot, stop
+                    prepared.mesh, prepared.engine, limit, point.state, on_shot, stop
                 )
             error_log = monitor.finish(result.state)
             saved = result.stop_reason in RESUMABLE or budget.seconds is not None
@@ -279,7 +274,7 @@ def render(
             prepared.engine.release_columns()  # refinement and the outputs need none
             check_output_range(result.radiosity, scene_path)
             solved, solution = prepared, result.radiosity
-            rounds = resuming.kept_refinement(checkpoint, key, solution) if state else None
+            rounds = resuming.kept_refinement(checkpoint, key, solution) if point.state else None
             taken = resuming.taken_rounds(taken, rounds, settings.refine)
             with timed(timings, "refine"):
                 baked, result, refinement = pipeline.refine_solution(

@@ -13,7 +13,7 @@ import dataclasses
 import hashlib
 import logging
 import os
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from pathlib import Path
 from typing import Any, NamedTuple
 
@@ -121,16 +121,17 @@ def save_run(
     key: dict[str, Any],
     engine: FormFactorEngine,
     whole_pass: bool = False,
-    history: ErrorLog | None = None,
-    balance: dict[str, Any] | None = None,
+    logs: list[ErrorLog] | None = None,
+    balance: Callable[[], dict[str, Any]] | None = None,
 ) -> None:
     """:func:`save_state` with what a run's ``engine`` holds: the columns of its pass (cut
     short; every one with ``whole_pass``) and, once the pass is balanced, its scales with
-    ``balance``, balancing's summary (:class:`SavedScales`)."""
+    balancing's summary, ``balance()`` (:class:`SavedScales`; not asked for before); the
+    solve's error log is ``logs[0]`` (none while ``logs`` is empty)."""
     done = engine.balanced_scales()
-    scales = SavedScales(done, dict(balance or {})) if done else None
+    scales = SavedScales(done, dict(balance() if balance else {})) if done else None
     columns = engine.pass_column_parts(whole_pass)
-    save_state(path, state, key, columns, whole_pass, history, scales)
+    save_state(path, state, key, columns, whole_pass, logs[0] if logs else None, scales)
 
 
 def resume_point(path: Path, key: dict[str, Any], strict: bool = True) -> ResumePoint:

@@ -213,7 +213,7 @@ def test_a_finished_pass_resumes_from_its_balanced_scales(tmp_path: Path) -> Non
         count = full.mesh.receiver_count
         state = api.solve(full, SETTINGS).state
         full.engine.release_columns()
-        save_run(path, state, key, full.engine, history=None, balance=full.balance)
+        save_run(path, state, key, full.engine, balance=lambda: full.balance)
         want = [full.engine.column(p).factors for p in (0, 7, 23)]
         closed, sums = full.engine.closed_rows, full.engine.row_sums()
     back, columns, _, scales = resume_point(path, key)
