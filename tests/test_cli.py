@@ -354,6 +354,14 @@ def test_a_time_limited_refinement_resumes_without_pass_or_solve(
     summary = capsys.readouterr().out
     assert f"{cut['receivers_interpolated']} of them interpolated" in summary
     assert f"+{cut['receivers_added']} receivers in 0 rounds and one cut short" in summary
+    # the discretisation part comes with its own standard error (the check's sampling)
+    error = first.report["error"]
+    worst = int(np.argmax(error["parts"]["discretisation"]))
+    spread = error["discretisation_standard_error"][worst]
+    assert 0 < spread < error["parts"]["discretisation"][worst]
+    assert f"discretisation {error['parts']['discretisation'][worst]:.2e} ± {spread:.2e}" in (
+        summary
+    )
     # the scene line counts every receiver baked, and says how many were solved
     receivers = first.report["statistics"]["receivers"]
     assert receivers == cut["receivers_solved"] + cut["receivers_added"]

@@ -203,6 +203,18 @@ def _named_below(error: dict[str, Any]) -> str:
     return ""
 
 
+def _sampling(error: dict[str, Any], part: str) -> str:
+    """`` ± SE`` after the discretisation part: its own standard error from the residual
+    check's sampling, in the channel of its largest value (another seed's check lands
+    within about that)."""
+    spread = error.get("discretisation_standard_error")
+    values = error["parts"][part]
+    if part != "discretisation" or not spread or None in values or None in spread:
+        return ""
+    worst = spread[max(range(len(values)), key=values.__getitem__)]
+    return f" ± {_fmt(worst)}" if worst > 0 else ""
+
+
 def _solved(report: dict[str, Any]) -> str:
     """`` (N solved, the rest added by refinement)`` when refinement added receivers."""
     refinement = report.get("refinement") or {}
@@ -252,7 +264,8 @@ def _print_summary(report: dict[str, Any], outputs: dict[str, Path]) -> None:
         lines.append(text + " of the solve (relative RMS, worst channel)")
     if error.get("total_rms") is not None and math.isfinite(max(_finite(error["total_rms"]))):
         parts = ", ".join(
-            f"{name} {_fmt(max(_finite(values)))}" for name, values in error["parts"].items()
+            f"{name} {_fmt(max(_finite(values)))}" + _sampling(error, name)
+            for name, values in error["parts"].items()
         )
         lines.append(
             f"total      {_fmt(max(_finite(error['total_rms'])))} estimated against the "

@@ -40,7 +40,7 @@ from __future__ import annotations
 
 from collections.abc import Iterator
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -91,12 +91,16 @@ class ErrorParts:
         See the module docstring.
     samples : int
         Points the discretisation part was measured at.
+    discretisation_standard_error : (3,) float64
+        The discretisation part's own standard error, from the check's sampling
+        (:attr:`Residual.standard_error`) [1].
     """
 
     algebraic: np.ndarray
     discretisation: np.ndarray
     conservation: np.ndarray
     samples: int = 0
+    discretisation_standard_error: np.ndarray = field(default_factory=lambda: np.zeros(3))
 
     @property
     def total(self) -> np.ndarray:
@@ -137,6 +141,12 @@ class Residual:
     gain : (3,) float64
         Interreflection amplification ``1 / (1 - rho g)`` [1].
     samples : int
+    standard_error : (3,) float64
+        ``error``'s own standard error from the check's sampling of points and rays [1]:
+        the mean square's standard error carried through the square root (the delta
+        method). A check with another seed lands within about this of ``error`` (the
+        Cornell box's default bake, 8 seeds: 3.6e-3 to 5.6e-3, standard deviation
+        6.8e-4, against 5.1e-4 to 7.7e-4 computed here).
     """
 
     error: np.ndarray
@@ -144,6 +154,7 @@ class Residual:
     noise: np.ndarray
     gain: np.ndarray
     samples: int
+    standard_error: np.ndarray = field(default_factory=lambda: np.zeros(3))
 
 
 def discretisation_error(
@@ -218,12 +229,16 @@ def discretisation_error(
     rel = np.where(norm > 0, 1.0 / np.where(norm > 0, norm, 1.0), 0.0)
     reflectance = area @ mesh.receiver_reflectance / max(float(area.sum()), 1e-300)
     gain = 1.0 / np.maximum(1.0 - reflectance * min(capture, 1.0), 1e-6)
+    root = np.sqrt(mean + STANDARD_ERRORS * spread)
+    # d sqrt(m) = dm / (2 sqrt(m)): the mean square's standard error through the root
+    slope = np.where(root > 0, 0.5 / np.where(root > 0, root, 1.0), 0.0)
     return Residual(
-        error=np.sqrt(mean + STANDARD_ERRORS * spread) * rel * gain,
+        error=root * rel * gain,
         residual=np.sqrt(mean) * rel,
         noise=np.sqrt(noise) * rel,
         gain=gain,
         samples=samples,
+        standard_error=slope * spread * rel * gain,
     )
 
 

@@ -494,6 +494,7 @@ def total_error(
         discretisation=residual.error,
         conservation=conservation_error(solved.engine, mesh),
         samples=residual.samples,
+        discretisation_standard_error=residual.standard_error,
     )
 
 

@@ -122,6 +122,8 @@ def add_total_error(
     }
     report["error"]["dominant"] = error.dominant
     report["error"]["samples"] = error.samples
+    standard_error = error.discretisation_standard_error.tolist()
+    report["error"]["discretisation_standard_error"] = _strict(standard_error)
     report["refinement"] = {
         "receivers_solved": solved_receivers,
         "receivers_added": refinement.added,

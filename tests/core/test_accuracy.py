@@ -183,6 +183,39 @@ def test_an_error_confined_to_a_spot_is_found_at_every_seed(
         assert residual.error[1] <= 3.0 * truth
 
 
+def test_the_standard_error_says_how_far_another_seed_lands(
+    prepare_scene: Callable[..., Prepared],
+) -> None:
+    """The check is a sample of points and rays: each check's own standard error
+    (``Residual.standard_error``, from its own data alone) agrees with the spread of the
+    figure over 16 seeds within a factor of 2, both for a smooth bake (nearly exact: the
+    figure is the check's noise floor) and for an error confined to one vertex (a skewed
+    sample, the harder case)."""
+    builder = SceneBuilder()
+    builder.material("floor", 0.5)
+    builder.material("lamp", 0.0, 10.0)
+    builder.quad(rectangle(1, 0.0, (0.0, 0.0), (1.0, 1.0)), "floor", (0, 1, 0))
+    builder.quad(rectangle(1, 1.0, (0.4, 0.4), (0.6, 0.6)), "lamp", (0, -1, 0))
+    prepared = prepare_scene(builder.build(), MeshSettings(receivers=1500))
+    mesh = prepared.mesh
+    baked = solve(mesh, prepared.engine, SolveSettings()).radiosity
+    spot = baked.copy()
+    spot[np.argmin(np.linalg.norm(mesh.receiver_position - [0.3, 0.0, 0.7], axis=1))] *= 2.0
+    counted = counted_receivers(mesh)
+    for radiosity in (baked, spot):
+        checks = [
+            discretisation_error(
+                prepared.scene, mesh, radiosity, counted, 0.0, samples=256, rays=256, seed=seed
+            )
+            for seed in range(16)
+        ]
+        figures = np.array([c.error[1] for c in checks])
+        standard_errors = np.array([c.standard_error[1] for c in checks])
+        assert (standard_errors > 0).all() and (standard_errors < figures).all()
+        ratio = figures.std(ddof=1) / standard_errors.mean()
+        assert 0.5 < ratio < 2.0, ratio
+
+
 def test_the_estimate_does_not_depend_on_the_threads(
     prepare_furnace: Callable[..., Prepared], monkeypatch: pytest.MonkeyPatch
 ) -> None:
