@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from raytrad.arrays import (
+    column_max,
     corner_max,
     corner_mean,
     corner_min,
@@ -104,3 +105,14 @@ def test_corner_reductions_are_numpys_to_the_bit(scale: float) -> None:
     np.testing.assert_array_equal(corner_max(values) - corner_min(values), np.ptp(values, axis=1))
     right = np.array([[[0.0, 0.0, 0.0], [3.0, 0.0, 0.0], [0.0, 4.0, 0.0]]])
     assert longest_side(right)[0] == 5.0
+
+
+def test_column_max_is_numpys_axis_zero_max() -> None:
+    """Each column's largest value, NaN where a column holds one, as ``max(axis=0)``
+    gives it, for the error log's (N, 3) arrays and a single row."""
+    rng = np.random.default_rng(5)
+    values = rng.normal(size=(1000, 3))
+    values[17, 1] = np.nan
+    values[3, 2] = np.inf
+    for case in (values, np.abs(values), values[:1], rng.normal(size=(50, 5))):
+        np.testing.assert_array_equal(column_max(case), case.max(axis=0))

@@ -346,6 +346,9 @@ def test_a_job_stopped_while_refining_is_interrupted_and_resumed(
     monkeypatch.setattr(adaptive, "_gather", original)
     second = jobs.run_job(job)
     assert second.status == "done" and second.resumed
+    report = json.loads((tmp_path / "out" / "report.json").read_text())
+    assert report["resumed"]["form_factor_scales"]  # the pass's scales: no pass traced
+    assert report["solve"]["form_factor_columns"] == report["solve"]["rays"] == 0
     _, _, got = read_radiosity_ply(tmp_path / "out" / "cornell.ply")
     np.testing.assert_array_equal(got, straight.result.radiosity.astype(np.float32))
     assert jobs.run_job(job).status == "skipped"
