@@ -249,7 +249,7 @@ def _print_summary(report: dict[str, Any], outputs: dict[str, Path]) -> None:
             if not stats["occlusion_tested"]
             else _taken_pass(report["resumed"])
             if report.get("resumed") and not s["rays_naive"]
-            else f" ({s['rays_per_second']:.3g} rays/s; {_naive(s['rays'], s['rays_naive'])})"
+            else f" ({s['rays_per_second']:.2e} rays/s; {_naive(s['rays'], s['rays_naive'])})"
         ),
         "time       " + ", ".join(f"{k} {v:.2f}s" for k, v in t.items()) + f"; total {total:.2f}s",
     ]

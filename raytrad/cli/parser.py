@@ -189,9 +189,9 @@ def build_parser() -> argparse.ArgumentParser:
     render.add_argument(
         "--resume",
         action="store_true",
-        help="continue a stopped run (Ctrl-C, --time-limit, --max-shots) from its checkpoint "
-        "in DIR; --max-shots counts the whole solve's shots, --time-limit this command's "
-        "seconds",
+        help="continue a stopped run (Ctrl-C, SIGTERM, --time-limit, --max-shots, or a killed "
+        "run's last periodic checkpoint, see --checkpoint-every) from its checkpoint in DIR; "
+        "--max-shots counts the whole solve's shots, --time-limit this command's seconds",
     )
     compare = sub.add_parser(
         "compare",

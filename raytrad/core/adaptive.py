@@ -282,9 +282,10 @@ def refine_adaptively(
         out.change_rms = _change_rms(changes, out.mesh, out.radiosity)
         cut = f" and one cut short ({out.interpolated} of them interpolated)"
         log.info(
-            "refinement: %d receivers added in %d rounds%s (%s)",
+            "refinement: %d receivers added in %d round%s%s (%s)",
             out.added,
             out.rounds,
+            "" if out.rounds == 1 else "s",
             cut if out.interpolated else "",
             ", ".join(f"{n} {c}" for n, c in out.by_object.items()),
         )

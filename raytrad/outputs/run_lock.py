@@ -101,9 +101,9 @@ class RunLock:
         for path in leftovers:
             path.unlink(missing_ok=True)
         if leftovers:
-            log.info(
-                "%s: removed %d temporary files a killed run left", self.directory, len(leftovers)
-            )
+            count = len(leftovers)
+            files = "file" if count == 1 else "files"
+            log.info("%s: removed %d temporary %s a killed run left", self.directory, count, files)
 
     def _heartbeat(self) -> None:
         while not self._stop_heartbeat.wait(HEARTBEAT_SECONDS):
