@@ -42,6 +42,27 @@ def unique(values: np.ndarray) -> np.ndarray:
     return flat[keep]
 
 
+def unique_inverse(keys: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``np.unique(keys, return_inverse=True)`` for non-negative integer ``keys`` (any
+    shape; the inverse flat): the sorted distinct keys and each key's index among them.
+    Keys spanning no more than :data:`DENSE_SPAN` times their count are marked in a table
+    instead of sorted (a refined mesh's edge and corner keys: a third to a fifth of the
+    sort's time, the same arrays); wider ones go to ``np.unique``."""
+    flat = np.asarray(keys).reshape(-1)
+    if len(flat) == 0 or int(flat.max()) >= DENSE_SPAN * len(flat) or int(flat.min()) < 0:
+        distinct, inverse = np.unique(flat, return_inverse=True)
+        return distinct, inverse.reshape(-1)
+    present = np.zeros(int(flat.max()) + 1, dtype=bool)
+    present[flat] = True
+    distinct = np.flatnonzero(present).astype(flat.dtype, copy=False)
+    rank = np.cumsum(present, dtype=np.int64) - 1
+    return distinct, rank[flat]
+
+
+#: The widest span of keys, per key, that :func:`unique_inverse` marks in a table.
+DENSE_SPAN = 8
+
+
 def column_max(values: np.ndarray) -> np.ndarray:
     """(C,) the largest value of each column of ``values`` ((N, C), N >= 1), NaN where a
     column holds one: ``values.max(axis=0)``, a column at a time. numpy reduces a few

@@ -20,7 +20,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from raytrad.arrays import corner_mean, longest_side, spatially_ordered, unique
+from raytrad.arrays import corner_mean, longest_side, spatially_ordered, unique, unique_inverse
 from raytrad.constants import scene_diagonal, scene_extent, tol
 from raytrad.core.imprint import Outlines, imprint_outlines, outline_segments
 from raytrad.core.intersections import intersection_segments
@@ -426,8 +426,7 @@ def surface_receivers(
     corner_surface = np.repeat(surface, 3)
     stride = int(corner_surface.max(initial=0)) + 1
     key = corner_vertex.astype(np.int64) * stride + corner_surface  # sorts as (vertex, surface)
-    distinct, inverse = np.unique(key, return_inverse=True)
-    inverse = inverse.reshape(-1)
+    distinct, inverse = unique_inverse(key)  # marked in a table: no sort
     count = len(distinct)
     triangle_third = area / 3.0
     third = np.repeat(triangle_third, 3)

@@ -15,7 +15,10 @@ from raytrad.core.mesh import RadiosityMesh
 def twin_triangles(triangles: np.ndarray) -> np.ndarray:
     """(T,) int64: the reversed copy of each triangle (other side of a two-sided surface),
     or -1."""
-    key = np.sort(triangles, axis=1)
+    key = np.sort(triangles, axis=1).astype(np.int64)
+    count = int(key.max(initial=0)) + 1
+    if count < 1 << 21:  # one int64 a triangle, ordered as the rows: sorted 4x as fast
+        key = (key[:, 0] * count + key[:, 1]) * count + key[:, 2]
     _, inverse, counts = np.unique(key, axis=0, return_inverse=True, return_counts=True)
     inverse = inverse.reshape(-1)
     twin = np.full(len(triangles), -1, dtype=np.int64)
