@@ -389,6 +389,13 @@ def solve(
     radiosity = problem.receiver_radiosity(state.irradiance)
     if not np.isfinite(radiosity).all():
         raise SolverError("the solve produced non-finite radiosity")
+    log.info(  # the stage's end in a log without progress bars (CI), as the pass's
+        "solve: %s after %d shots in %.2f s, residual %.2e",
+        reason,
+        state.shots,
+        state.seconds,
+        residual,
+    )
     return SolveResult(
         radiosity=radiosity,
         state=state,
