@@ -139,6 +139,17 @@ def test_points_go_where_the_light_changes_and_are_weighted_back(
     np.testing.assert_allclose(weighted, area_share, rtol=0.1)
 
 
+def _lamp_over_floor(prepare_scene: Callable[..., Prepared]) -> tuple[Prepared, np.ndarray]:
+    """An open floor under a small lamp (1 500 receivers) and its solved radiosity."""
+    builder = SceneBuilder()
+    builder.material("floor", 0.5)
+    builder.material("lamp", 0.0, 10.0)
+    builder.quad(rectangle(1, 0.0, (0.0, 0.0), (1.0, 1.0)), "floor", (0, 1, 0))
+    builder.quad(rectangle(1, 1.0, (0.4, 0.4), (0.6, 0.6)), "lamp", (0, -1, 0))
+    prepared = prepare_scene(builder.build(), MeshSettings(receivers=1500))
+    return prepared, solve(prepared.mesh, prepared.engine, SolveSettings()).radiosity
+
+
 def test_an_error_confined_to_a_spot_is_found_at_every_seed(
     prepare_scene: Callable[..., Prepared],
 ) -> None:
@@ -149,14 +160,8 @@ def test_an_error_confined_to_a_spot_is_found_at_every_seed(
     # 0.15 % of the floor: area-uniform points would miss them in most draws of 256;
     # drawn by spread, every seed finds them and reports no less than the error and at
     # most three times it.
-    builder = SceneBuilder()
-    builder.material("floor", 0.5)
-    builder.material("lamp", 0.0, 10.0)
-    builder.quad(rectangle(1, 0.0, (0.0, 0.0), (1.0, 1.0)), "floor", (0, 1, 0))
-    builder.quad(rectangle(1, 1.0, (0.4, 0.4), (0.6, 0.6)), "lamp", (0, -1, 0))
-    prepared = prepare_scene(builder.build(), MeshSettings(receivers=1500))
+    prepared, baked = _lamp_over_floor(prepare_scene)
     mesh = prepared.mesh
-    baked = solve(mesh, prepared.engine, SolveSettings()).radiosity
     floor = mesh.receiver_normal[:, 1] > 0.5
     centre = np.flatnonzero(floor)[
         np.argmin(np.linalg.norm(mesh.receiver_position[floor] - [0.3, 0.0, 0.7], axis=1))
@@ -191,14 +196,8 @@ def test_the_standard_error_says_how_far_another_seed_lands(
     figure over 16 seeds within a factor of 2, both for a smooth bake (nearly exact: the
     figure is the check's noise floor) and for an error confined to one vertex (a skewed
     sample, the harder case)."""
-    builder = SceneBuilder()
-    builder.material("floor", 0.5)
-    builder.material("lamp", 0.0, 10.0)
-    builder.quad(rectangle(1, 0.0, (0.0, 0.0), (1.0, 1.0)), "floor", (0, 1, 0))
-    builder.quad(rectangle(1, 1.0, (0.4, 0.4), (0.6, 0.6)), "lamp", (0, -1, 0))
-    prepared = prepare_scene(builder.build(), MeshSettings(receivers=1500))
+    prepared, baked = _lamp_over_floor(prepare_scene)
     mesh = prepared.mesh
-    baked = solve(mesh, prepared.engine, SolveSettings()).radiosity
     spot = baked.copy()
     spot[np.argmin(np.linalg.norm(mesh.receiver_position - [0.3, 0.0, 0.7], axis=1))] *= 2.0
     counted = counted_receivers(mesh)
