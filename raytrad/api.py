@@ -241,7 +241,7 @@ def render(
     with RunLock(output_dir):  # one run at a time in a folder
         key = fingerprint(loaded.scene, settings.system_settings())
         checkpoint = checkpoint_path(output_dir, scene_path.stem)
-        point = resume_point(checkpoint, key, resume is True) if resume else resuming.ResumePoint()
+        point = resume_point(checkpoint, key, resume, settings.solve)
         taken = resuming.resume_facts(point.state, point.columns, point.scales)  # before solve
         logs: list[ErrorLog] = []  # the solve's error log, saved with its state
 

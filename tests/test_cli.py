@@ -322,8 +322,9 @@ def test_a_time_limited_refinement_resumes_without_pass_or_solve(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
 ) -> None:
     """A time-limited run whose refinement is cut keeps a checkpoint of the converged
-    solve with every column: ``--resume`` traces no pass, shoots no shot, refines to the
-    end and gives the uninterrupted bake."""
+    solve with every column and the pass's balanced scales: ``--resume`` traces no pass
+    and, the solve having converged, reads no column back (the scales are all refinement
+    needs), shoots no shot, refines to the end and gives the uninterrupted bake."""
     from raytrad.core import adaptive, pipeline
 
     scene = SCENES / "cornell-box.obj"
@@ -371,7 +372,8 @@ def test_a_time_limited_refinement_resumes_without_pass_or_solve(
     )
     second = api.render(scene, out, settings, resume=True)
     resumed = second.report["resumed"]
-    assert resumed["form_factor_columns"] == first.prepared.mesh.patch_count
+    assert resumed["form_factor_columns"] == 0 and resumed["form_factor_scales"]
+    assert second.report["solve"]["form_factor_columns"] == 0
     assert resumed["shots"] == first.result.state.shots == second.result.state.shots
     assert second.report["solve"]["rays"] == 0 and not second.refinement.stopped
     assert not (out / "cornell-box.checkpoint.npz").exists()

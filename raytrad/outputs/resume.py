@@ -23,7 +23,7 @@ from raytrad.core.adaptive import Refinement, RefineSettings, goes_on_from
 from raytrad.core.convergence import ErrorLog
 from raytrad.core.formfactor import BALANCED_SCALES, FormFactorEngine
 from raytrad.core.mesh import RadiosityMesh
-from raytrad.core.solver import SolverState
+from raytrad.core.solver import SolverState, SolveSettings
 from raytrad.errors import RaytradError
 from raytrad.formats.checkpoint import Spool, read_checkpoint, write_checkpoint
 from raytrad.scene import Scene, scene_digests
@@ -125,43 +125,54 @@ def save_run(
     balance: Callable[[], dict[str, Any]] | None = None,
 ) -> None:
     """:func:`save_state` with what a run's ``engine`` holds: the columns of its pass (cut
-    short; every one with ``whole_pass``), or, once the pass is balanced and the engine
-    holds no column (released after the solve, or ``--cache-mb 0``), its balanced scales
-    with balancing's summary, ``balance()`` (:class:`SavedScales`; not asked for
-    otherwise); the solve's error log is ``logs[0]`` (none while ``logs`` is empty).
+    short; every one with ``whole_pass``) and, once the pass is balanced, with
+    ``whole_pass`` or when the engine holds no column (released after the solve, or
+    ``--cache-mb 0``), its balanced scales with balancing's summary, ``balance()``
+    (:class:`SavedScales`; not asked for otherwise); the solve's error log is ``logs[0]``
+    (none while ``logs`` is empty).
 
     A state saved during the solve keeps no scales: its resume's shots need nearly every
     column, which a pass computes on every core faster than shots ask for them one at a
     time (the default Cornell box killed at shot 192 resumed in 15.8 s through a pass,
     against 17.3 s from scales, its solve then 6.9 s against a 5.2 s pass and 0.9 s of
     shots)."""
-    done = engine.balanced_scales() if not engine.held_bytes else {}
+    done = engine.balanced_scales() if whole_pass or not engine.held_bytes else {}
     scales = SavedScales(done, dict(balance() if balance else {})) if done else None
     columns = engine.pass_column_parts(whole_pass)
     save_state(path, state, key, columns, whole_pass, logs[0] if logs else None, scales)
 
 
-def resume_point(path: Path, key: dict[str, Any], strict: bool = True) -> ResumePoint:
+def resume_point(
+    path: Path,
+    key: dict[str, Any],
+    resume: bool | str = True,
+    solve: SolveSettings | None = None,
+) -> ResumePoint:
     """What ``--resume`` continues from: the saved solver state, the columns of a
     form-factor pass cut short, the error log of the solve so far and the balanced scales
-    of a finished pass (:class:`ResumePoint`; every field None without a checkpoint; the
-    log None when the checkpoint has none, or an unreadable one).
+    of a finished pass (:class:`ResumePoint`; every field None without a checkpoint, or
+    with ``resume`` False; the log None when the checkpoint has none, or an unreadable one).
 
-    With ``strict`` False (batch jobs), a checkpoint that does not match or cannot be read
-    is passed over with a warning, and the run starts afresh.
+    With ``resume`` ``"auto"`` (batch jobs), a checkpoint that does not match or cannot be
+    read is passed over with a warning, and the run starts afresh.
 
     A state saved while the pass was incomplete is dropped (None): its shots went through
     factors not yet balanced, so the solve starts again once the pass is done (those were
     only the first, direct-light shots), and a resumed run gives the uninterrupted answer.
-    A state saved after the pass comes back with its scales (and every column, when a
-    solve cut short saved them): the resume shoots, or refines, without tracing the pass
-    again.
+    A state saved after the pass comes back with its scales, or every column when a solve
+    cut short saved them: the resume shoots, or refines, without tracing the pass again.
+    When the state's solve had reached ``solve``'s tolerance (its error log's last row)
+    and the scales were kept, the columns stay on disk: refinement needs none, and a shot
+    that does computes its column (a time limit's chain resumed 630 MB it never read).
 
     Raises
     ------
     RaytradError
-        As :func:`load_state`, when ``strict``; also when the scales are damaged.
+        As :func:`load_state`, when ``resume`` is True; also when the scales are damaged.
     """
+    if not resume:
+        return ResumePoint()
+    strict = resume is True
     if not Path(path).exists():
         say = log.warning if strict else log.info  # batch jobs resume whenever they can
         say("%s: no checkpoint to resume from; starting afresh", path)
@@ -179,8 +190,20 @@ def resume_point(path: Path, key: dict[str, Any], strict: bool = True) -> Resume
     if columns and not whole:
         log.info("resuming the form-factor pass from %s: %d columns", path, len(columns["patch"]))
         return ResumePoint(columns=columns)
+    history = _history(path, record)
+    if columns and scales is not None and _converged(history, state, solve):
+        log.info("%s: the solve had converged; its columns are not read back", path)
+        columns = {}
     log.info("resuming from %s at shot %d", path, state.shots)
-    return ResumePoint(state, columns or None, _history(path, record), scales)
+    return ResumePoint(state, columns or None, history, scales)
+
+
+def _converged(history: ErrorLog | None, state: SolverState, solve: SolveSettings | None) -> bool:
+    """Whether the error log of a saved ``state`` ends at its shots with a residual within
+    ``solve``'s tolerance (False without either)."""
+    if history is None or solve is None or not history.shots:
+        return False
+    return history.shots[-1] == state.shots and history.residual[-1] <= solve.tolerance
 
 
 def _saved_scales(

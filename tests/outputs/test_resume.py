@@ -236,7 +236,35 @@ def test_a_finished_pass_resumes_from_its_balanced_scales(tmp_path: Path) -> Non
     save_state(path, state, key, scales=SavedScales(missing, scales.summary))
     with pytest.raises(RaytradError, match="balanced scales are incomplete"):
         resume_point(path, key)
-    assert resume_point(path, key, strict=False) == (None, None, None, None)
+    assert resume_point(path, key, "auto") == (None, None, None, None)
+    assert resume_point(path, key, False) == (None, None, None, None)
+
+
+def test_a_converged_solves_columns_are_read_back_only_if_it_must_shoot(
+    tmp_path: Path,
+) -> None:
+    """A solve's checkpoint with every column and the scales (as a time-limited run saves
+    it): resumed at the tolerance it reached, its columns are not read back (refinement
+    needs only the scales); resumed with a tighter one, they are, for the shots to come."""
+    from raytrad.core.convergence import ConvergenceMonitor
+    from raytrad.core.pipeline import prepare
+    from raytrad.core.solver import SolveSettings, solve
+    from raytrad.outputs.resume import resume_point, save_run
+
+    key = fingerprint(cornell_box(), SETTINGS.system_settings())
+    path = tmp_path / "w.npz"
+    with prepare(cornell_box(), SETTINGS.mesh) as full:
+        monitor = ConvergenceMonitor(full.mesh, full.engine)
+        result = solve(full.mesh, full.engine, SETTINGS.solve, progress=monitor)
+        monitor.finish(result.state)
+        save_run(path, result.state, key, full.engine, True, [monitor.log], lambda: full.balance)
+    assert result.stop_reason == "converged"
+    reached = resume_point(path, key, True, SETTINGS.solve)
+    assert reached.state is not None and reached.scales is not None
+    assert reached.columns is None
+    tighter = resume_point(path, key, True, SolveSettings(tolerance=1e-5))
+    assert tighter.scales is not None and tighter.columns is not None
+    assert len(tighter.columns["patch"]) == result.state.shot.shape[0]
 
 
 def test_checkpoints_are_written_every_interval(tmp_path: Path) -> None:
