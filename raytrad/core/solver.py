@@ -390,7 +390,7 @@ def solve(
     if not np.isfinite(radiosity).all():
         raise SolverError("the solve produced non-finite radiosity")
     log.info(  # the stage's end in a log without progress bars (CI), as the pass's
-        "solve: %s after %d shots in %.2f s, residual %.2e",
+        "solve: %s after %d shots (%.2f s of solving, a resumed run's included), residual %.2e",
         reason,
         state.shots,
         state.seconds,
