@@ -272,7 +272,8 @@ def _print_summary(report: dict[str, Any], outputs: dict[str, Path]) -> None:
             f"physical answer, {error['dominant']} dominates{_named_below(error)}: {parts}"
         )
     refinement = report.get("refinement") or {}
-    cut = "; stopped early by the time limit or an interrupt" if refinement.get("stopped") else ""
+    why = "an interrupt" if report["solve"]["stop_reason"] == "interrupted" else "the time limit"
+    cut = f"; stopped early by {why}" if refinement.get("stopped") else ""
     rounds = f"{refinement.get('rounds', 0)} round" + ("" if refinement.get("rounds") == 1 else "s")
     if refinement.get("receivers_interpolated"):
         rounds += " and one cut short"
@@ -285,7 +286,7 @@ def _print_summary(report: dict[str, Any], outputs: dict[str, Path]) -> None:
             f"{_naive(refinement['rays'], refinement['rays_naive'])}{cut})"
         )
     elif cut:
-        lines.append("refined    nothing: the time limit or an interrupt came first")
+        lines.append(f"refined    nothing: {why} came first")
     lines += [f"wrote      {path}" for path in outputs.values()]
     print("\n".join(lines))
 
