@@ -451,7 +451,8 @@ def _add_common(parser: argparse.ArgumentParser, default_tolerance: float) -> No
         type=float,
         default=RenderSettings().checkpoint_seconds,
         metavar="SECONDS",
-        help="seconds between checkpoints of a long form-factor pass or solve "
+        help="seconds between checkpoints of a long form-factor pass or solve; a pass "
+        "checkpoint also waits at least 9 times as long as the last one took to write "
         "(default: %(default)s)",
     )
     add("-q", "--quiet", action="store_true", help="no progress bar, only warnings and errors")
