@@ -384,7 +384,10 @@ def test_a_time_limited_refinement_resumes_without_pass_or_solve(
 
 @pytest.mark.skipif(sys.platform == "win32", reason="POSIX signals")
 def test_ctrl_c_while_refining_keeps_the_solve_and_its_rounds(
-    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+    tmp_path: Path,
+    monkeypatch: pytest.MonkeyPatch,
+    capsys: pytest.CaptureFixture[str],
+    caplog: pytest.LogCaptureFixture,
 ) -> None:
     """Ctrl-C in the second refinement round of a run without a time limit (so no
     checkpoint was written after the solve, and refinement released the columns): the
@@ -414,6 +417,7 @@ def test_ctrl_c_while_refining_keeps_the_solve_and_its_rounds(
     status, _, err = run_cli([*argv, "-q"], capsys)
     monkeypatch.setattr(adaptive, "_gather", original)
     assert status == 130, err
+    assert "refinement stopped in round 2 (interrupted)" in caplog.text  # it knows which
     report = json.loads((out / "report.json").read_text())
     assert report["solve"]["stop_reason"] == "interrupted" and report["refinement"]["stopped"]
     assert any("interrupted" in line for line in api.verify_outputs(out))

@@ -221,12 +221,14 @@ def refine_adaptively(
             out.resumable = done
             if out.rounds:
                 log.warning(
-                    "refinement stopped after %d rounds (time limit spent or interrupted): "
-                    "the mesh is coarser than a run without the limit makes",
+                    "refinement stopped after %d round%s (%s): the mesh is coarser than an "
+                    "uninterrupted run's",
                     out.rounds,
+                    "" if out.rounds == 1 else "s",
+                    stop_cause(stop),
                 )
             else:
-                log.warning("refinement skipped: time limit spent or interrupted")
+                log.warning("refinement skipped: %s", stop_cause(stop))
             break
         room = budget - out.mesh.receiver_count
         longest = longest_side(out.mesh.positions[out.mesh.triangles])
@@ -262,7 +264,7 @@ def refine_adaptively(
         del near  # its tables, the size of the mesh's, go before the next round's are built
         return_freed_memory()
         if gathered is None:  # stopped within the round: the last mesh's look, kept
-            _keep_interpolated(out, refined, before, new)
+            _keep_interpolated(out, refined, before, new, stop_cause(stop))
             out.resumable = done
             break
         changes.append((before - gathered, refined.receiver_area[new]))
@@ -292,8 +294,16 @@ def refine_adaptively(
     return out
 
 
+def stop_cause(stop: Callable[[], bool] | None) -> str:
+    """What a True ``stop`` poll meant, in words: its ``cause()`` where it has one (a run's
+    :class:`~raytrad.core.pipeline.RunBudget` knows whether its time was spent or Ctrl-C
+    asked), else either."""
+    cause = getattr(stop, "cause", None)
+    return str(cause()) if callable(cause) else "time limit spent or interrupted"
+
+
 def _keep_interpolated(
-    out: Refinement, refined: RadiosityMesh, before: np.ndarray, new: np.ndarray
+    out: Refinement, refined: RadiosityMesh, before: np.ndarray, new: np.ndarray, cause: str
 ) -> None:
     """A round stopped before its gather finished: its new receivers keep the
     interpolation of the mesh before it (``before``, their emission where hidden), which
@@ -307,9 +317,10 @@ def _keep_interpolated(
     out.interpolated = len(new)
     out.stopped = True
     log.warning(
-        "refinement stopped in round %d (time limit spent or interrupted): its %d new "
-        "receivers show the interpolation of the round before",
+        "refinement stopped in round %d (%s): its %d new receivers show the interpolation "
+        "of the round before",
         out.rounds + 1,
+        cause,
         len(new),
     )
 

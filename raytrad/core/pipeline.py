@@ -299,6 +299,11 @@ class RunBudget:
         spent = self.seconds is not None and self.elapsed() + self.reserve() >= self.seconds
         return spent or (self.stop is not None and self.stop())
 
+    def cause(self) -> str:
+        """What a True poll meant, for a warning: ``interrupted`` when ``stop`` asks (Ctrl-C,
+        a signal), else ``time limit spent``."""
+        return "interrupted" if self.stop is not None and self.stop() else "time limit spent"
+
     def elapsed(self) -> float:
         """Seconds since ``start`` [s]."""
         return time.perf_counter() - self.start

@@ -129,6 +129,13 @@ def test_run_budget_counts_from_the_run_start() -> None:
     assert RunBudget(10.0, start=time.perf_counter() - 11.0)()
     assert RunBudget(None, stop=lambda: True)()
     assert RunBudget(None).solve_settings(SolveSettings(), 0.0).time_limit is None
+    # what a True poll meant, for refinement's warnings (adaptive.stop_cause)
+    from raytrad.core.adaptive import stop_cause
+
+    spent = RunBudget(10.0, stop=lambda: False, start=time.perf_counter() - 11.0)
+    assert stop_cause(spent) == "time limit spent"
+    assert stop_cause(RunBudget(None, stop=lambda: True)) == "interrupted"
+    assert stop_cause(lambda: True) == "time limit spent or interrupted"  # a bare poll
 
 
 def test_run_budget_keeps_back_the_time_to_write_the_columns() -> None:
