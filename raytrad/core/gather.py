@@ -409,7 +409,7 @@ def node_means(
         return numpy_node_means(
             start, stop, sub_tri, visible_area, corners, corner_share, receivers
         )
-    pointer, sources, shares = fast.node_means(
+    return fast.node_means(
         np.ascontiguousarray(start, dtype=np.int64),
         np.ascontiguousarray(stop, dtype=np.int64),
         np.ascontiguousarray(sub_tri, dtype=np.int64),
@@ -418,7 +418,6 @@ def node_means(
         np.ascontiguousarray(corner_share, dtype=np.float64),
         int(receivers),
     )
-    return pointer, sources, shares
 
 
 def numpy_node_means(

@@ -1,13 +1,15 @@
-"""What a bake shows where the solve hid receivers.
+"""Receivers the solve hides, and what a bake shows there.
 
 A receiver under a block standing on the floor (see
-:func:`raytrad.core.mesh.hide_receivers`) keeps only its emission in the solve. Every
+:func:`hide_receivers`) keeps only its emission in the solve. Every
 product that interpolates the radiosity (images, lightmaps, the residual check of
 :mod:`raytrad.core.accuracy`, which reads the bake where its rays land) reads
 :func:`fill_hidden`'s values instead.
 """
 
 from __future__ import annotations
+
+from dataclasses import replace
 
 import numpy as np
 
@@ -19,7 +21,7 @@ def fill_hidden(mesh: RadiosityMesh, radiosity: np.ndarray, rings: int = 64) -> 
     """Radiosity for display, with hidden receivers given their visible neighbours' mean.
 
     A hidden receiver (under a block standing on the floor, see
-    :func:`raytrad.core.mesh.hide_receivers`) keeps only its own emission in the solve,
+    :func:`hide_receivers`) keeps only its own emission in the solve,
     but the triangles joining it to visible receivers are partly visible: interpolating
     toward its value would draw a dark saw-tooth rim along the block's base in images and
     lightmaps. Filling it from its edge neighbours on the same surface (receivers are split
@@ -66,3 +68,33 @@ def fill_hidden(mesh: RadiosityMesh, radiosity: np.ndarray, rings: int = 64) -> 
         out[ring] = total[ring] / seen[ring, None]
         known |= ring
     return out
+
+
+def hide_receivers(mesh: RadiosityMesh, hidden: np.ndarray) -> RadiosityMesh:
+    """The mesh with receivers that can neither see nor be seen taken out of the surface.
+
+    A receiver under a block standing on the floor sees only the block's inside. Its
+    radiosity stays as computed (its emission), but it no longer counts in its patch's
+    mean radiosity, its area is zero and its patch's area shrinks by its share, so a patch
+    half under the block shoots its visible half's radiosity from its visible area, and a
+    closed room loses no energy through the block's footprint.
+
+    Parameters
+    ----------
+    mesh : RadiosityMesh
+    hidden : (R,) bool
+    """
+    if not hidden.any():
+        return mesh
+    visible = ~np.asarray(hidden, dtype=bool)
+    corner_share = np.repeat(mesh.triangle_area / 3.0, 3) * visible[mesh.triangle_receivers].ravel()
+    patch_area = np.bincount(
+        np.repeat(mesh.triangle_patch, 3), weights=corner_share, minlength=mesh.patch_count
+    )
+    floor = 1e-12 * float(mesh.patch_area.sum())
+    return replace(
+        mesh,
+        receiver_area=mesh.receiver_area * visible,
+        patch_area=np.maximum(patch_area, floor),
+        receiver_visible=visible,
+    )

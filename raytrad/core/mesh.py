@@ -13,6 +13,7 @@ Everything is flat arrays; no Python object per element.
 
 from __future__ import annotations
 
+import functools
 import logging
 import math
 from collections.abc import Callable
@@ -84,7 +85,7 @@ class RadiosityMesh:
     positions : (V, 3) float64 [m], vertex positions of the refined mesh
     triangles : (T, 3) int64, vertex indices of the refined mesh
     receiver_visible : (R,) bool or None, False for receivers shut in by other surfaces
-        (see :func:`hide_receivers`); None means all visible
+        (see :func:`raytrad.core.hidden.hide_receivers`); None means all visible
     triangle_surface : (T,) int64 or None, the smooth surface of one material each refined
         triangle belongs to (receivers are split between surfaces); None when unknown
     """
@@ -136,8 +137,13 @@ class RadiosityMesh:
 
     def patch_subareas(self, patch: int) -> slice:
         """The slice of sub-area indices belonging to ``patch``."""
-        lo, hi = np.searchsorted(self.subarea_patch, [patch, patch + 1])
-        return slice(int(lo), int(hi))
+        return slice(self._subarea_ptr[patch], self._subarea_ptr[patch + 1])
+
+    @functools.cached_property
+    def _subarea_ptr(self) -> list[int]:
+        """Each patch's first sub-area, then their count (found once: pairs ask per chunk)."""
+        counts = np.bincount(self.subarea_patch, minlength=self.patch_count)
+        return np.concatenate([[0], np.cumsum(counts)]).tolist()
 
 
 # --------------------------------------------------------------------------------------
@@ -617,33 +623,3 @@ def _hash_uniform(keys: np.ndarray, seed: int, count: int) -> np.ndarray:
             z = z ^ (z >> np.uint64(31))
             out[:, k] = (z >> np.uint64(11)).astype(np.float64) / float(1 << 53)
     return out
-
-
-def hide_receivers(mesh: RadiosityMesh, hidden: np.ndarray) -> RadiosityMesh:
-    """The mesh with receivers that can neither see nor be seen taken out of the surface.
-
-    A receiver under a block standing on the floor sees only the block's inside. Its
-    radiosity stays as computed (its emission), but it no longer counts in its patch's
-    mean radiosity, its area is zero and its patch's area shrinks by its share, so a patch
-    half under the block shoots its visible half's radiosity from its visible area, and a
-    closed room loses no energy through the block's footprint.
-
-    Parameters
-    ----------
-    mesh : RadiosityMesh
-    hidden : (R,) bool
-    """
-    if not hidden.any():
-        return mesh
-    visible = ~np.asarray(hidden, dtype=bool)
-    corner_share = np.repeat(mesh.triangle_area / 3.0, 3) * visible[mesh.triangle_receivers].ravel()
-    patch_area = np.bincount(
-        np.repeat(mesh.triangle_patch, 3), weights=corner_share, minlength=mesh.patch_count
-    )
-    floor = 1e-12 * float(mesh.patch_area.sum())
-    return replace(
-        mesh,
-        receiver_area=mesh.receiver_area * visible,
-        patch_area=np.maximum(patch_area, floor),
-        receiver_visible=visible,
-    )

@@ -88,9 +88,6 @@ class PairFactors:
         self._sub_target = mesh.subarea_point + tol.ray_offset * diagonal * mesh.subarea_normal
         self._vert_index, self._vert_ptr = patch_vertices(mesh)
         self._edge_start, self._edge_end, self._edge_ptr = boundary_edges(mesh)
-        #: each patch's sub-areas, ``[p]:[p + 1]`` (``mesh.patch_subareas``, found once)
-        counts = np.bincount(mesh.subarea_patch, minlength=mesh.patch_count)
-        self._sub_ptr: list[int] = np.concatenate([[0], np.cumsum(counts)]).tolist()
         self._pieces = folded_pieces(mesh)
         #: Rays an unclassified caster would cast: (receiver, patch) pairs that see each
         #: other x the patch's sample points (the naive count shaft culling is set against).
@@ -184,14 +181,10 @@ class PairFactors:
         """Packed facet side bits of ray origins for :meth:`chunk` (None: no culling)."""
         return None if self.facets is None else self.facets.sides(origins)
 
-    def _subareas(self, patch: int) -> slice:
-        """The slice of ``patch``'s sub-areas (``mesh.patch_subareas``, without a search)."""
-        return slice(self._sub_ptr[patch], self._sub_ptr[patch + 1])
-
     def chunk_size(self, patch: int) -> int:
         """Receivers per chunk for ``patch``: :data:`PAIRS_PER_CHUNK` pairs of a receiver
         with a sub-area or a boundary edge."""
-        sub = self._subareas(patch)
+        sub = self.mesh.patch_subareas(patch)
         edges = int(self._edge_ptr[patch + 1] - self._edge_ptr[patch])
         return max(1, PAIRS_PER_CHUNK // max(sub.stop - sub.start, edges, 1))
 
@@ -219,7 +212,7 @@ class PairFactors:
         m = self.mesh
         unoccluded = self._unoccluded(x, nx, patch)
         sees = unoccluded > 0
-        sub = self._subareas(patch)
+        sub = m.patch_subareas(patch)
         with self._count_lock:
             self.naive_rays += int(sees.sum()) * (sub.stop - sub.start)
         doubt = sees if self.occluder is not None else np.zeros_like(sees)

@@ -35,7 +35,8 @@ from raytrad.core.adaptive import Refinement, RefineSettings, refine_adaptively
 from raytrad.core.balance import COLUMN_SCALE_LIMIT
 from raytrad.core.convergence import counted_receivers
 from raytrad.core.formfactor import FormFactorEngine
-from raytrad.core.mesh import MeshSettings, RadiosityMesh, build_mesh, hide_receivers
+from raytrad.core.hidden import hide_receivers
+from raytrad.core.mesh import MeshSettings, RadiosityMesh, build_mesh
 from raytrad.core.pairs import receiver_points
 from raytrad.core.repair import repair_scene
 from raytrad.core.solver import SolveResult, SolveSettings, check_solvable, filled_capture
