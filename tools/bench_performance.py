@@ -7,10 +7,12 @@ Three parts:
    ``raytrad render`` computes it before the first shot) is timed with shaft culling and
    convex blockers (the default), with shaft culling alone and tracing every pair; the
    default and unculled passes are run again with their rays recorded, and those rays
-   replayed through embreex's occlusion query, with the same threads, in the same
-   process (beyond 2**25 rays, a sample of their batches, its time scaled by the
-   rays). The last column sets each pass against raw Embree doing the unculled pass's
-   job: above 100% the pass finishes the job faster than Embree alone traces it.
+   replayed, with the same threads, in the same process (beyond 2**25 rays, a sample of
+   their batches, its time scaled by the rays), twice: through embreex's occlusion
+   query (``EmbreeScene.run``, one ray at a time: the issue's raw Embree) and through
+   Embree's 8-ray packets, as the pass traces them (``raytrad.core.embree``). The last
+   two columns set each pass against each doing the unculled pass's job: above 100% the
+   pass finishes the job faster than Embree alone traces it.
    ``rays / naive`` sets rays cast against receivers x samples of the pairs that see
    each other.
 2. **Compiled against numpy kernels; the solve.** The same pass with
@@ -52,6 +54,7 @@ import sys
 import tempfile
 import threading
 import time
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from types import SimpleNamespace
@@ -64,8 +67,9 @@ sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from raytrad.constants import scene_diagonal  # noqa: E402
-from raytrad.core import pairs, pipeline, solver  # noqa: E402
+from raytrad.core import embree, pairs, pipeline, solver  # noqa: E402
 from raytrad.core.hidden import fill_hidden  # noqa: E402
+from raytrad.core.kernels import visibility_rays  # noqa: E402
 from raytrad.core.mesh import MeshSettings  # noqa: E402
 from raytrad.core.pipeline import prepare  # noqa: E402
 from raytrad.core.visibility import Occluder  # noqa: E402
@@ -148,7 +152,20 @@ def timed_pass(
             recorded.add(o, d, t)
         return original(self, o, d, t)
 
+    samples = Occluder.occluded_samples
+
+    def recording_samples(self, origins, far, doubt, targets, near, near_targets, shorten):  # type: ignore[no-untyped-def]
+        if record:  # the pass's rays made in packets, written out too (as the numpy path)
+            traced = doubt[near]
+            o, d, t, _, _ = visibility_rays(
+                origins, far & doubt[:, None], targets, near[traced], near_targets[traced],
+                self.origin, shorten,
+            )  # fmt: skip
+            recorded.add(o, d, t)
+        return samples(self, origins, far, doubt, targets, near, near_targets, shorten)
+
     Occluder.occluded_local = recording  # type: ignore[method-assign]
+    Occluder.occluded_samples = recording_samples  # type: ignore[method-assign]
     engine = pipeline.FormFactorEngine
     pipeline.FormFactorEngine = functools.partial(engine, cull=cull)  # type: ignore[misc]
     find = pairs.blockers
@@ -158,27 +175,55 @@ def timed_pass(
         prepared = prepare(_scene(), MeshSettings(receivers=receivers))
     finally:
         Occluder.occluded_local = original  # type: ignore[method-assign]
+        Occluder.occluded_samples = samples  # type: ignore[method-assign]
         pipeline.FormFactorEngine = engine  # type: ignore[misc]
         pairs.blockers = find
     return prepared.timings["form_factors"], prepared, recorded
 
 
-def _replayed(receivers: int, cull: bool) -> tuple[float, int]:
-    """(seconds, rays) of embreex answering a pass's occlusion queries, recorded in a run
-    of the pass of its own; from a sample of its batches beyond :data:`RECORDED_RAYS`,
-    the seconds scaled by the rays cast over the rays replayed (said on a line)."""
+def _replayed(receivers: int, cull: bool) -> tuple[float, float, int]:
+    """(embreex's seconds, Embree packets' seconds, rays) answering a pass's occlusion
+    queries, recorded in a run of the pass of its own: once through embreex's single-ray
+    query (``EmbreeScene.run``, the issue's raw Embree) and once through the packets the
+    pass itself uses (:mod:`raytrad.core.embree`; embreex again where they are not
+    available). From a sample of its batches beyond :data:`RECORDED_RAYS`, the seconds
+    are scaled by the rays cast over the rays replayed (said on a line)."""
     _, prepared, recorded = timed_pass(receivers, record=True, cull=cull)
+    batches = [batch for _, batch in recorded.batches]
     try:
-        seconds, rays = replay(prepared.occluder, [batch for _, batch in recorded.batches])
+        occluder = prepared.occluder
+        with _rays_through("embreex"):
+            single = Occluder(occluder.positions, occluder.triangles)
+        try:
+            seconds, rays = replay(single, batches)
+        finally:
+            single.close()
+        packet_seconds, _ = replay(occluder, batches)
     finally:
         prepared.close()
     if recorded.share < 1.0:
         print(
             f"(raw Embree from a sample: {rays:.3g} of {recorded.rays:.3g} rays, one batch "
-            f"in {recorded.stride}, {seconds:.2f} s scaled by {1 / recorded.share:.1f})"
+            f"in {recorded.stride}, {seconds:.2f} s and {packet_seconds:.2f} s in packets, "
+            f"scaled by {1 / recorded.share:.1f})"
         )
         seconds /= recorded.share
-    return seconds, recorded.rays
+        packet_seconds /= recorded.share
+    return seconds, packet_seconds, recorded.rays
+
+
+@contextlib.contextmanager
+def _rays_through(kind: str) -> Iterator[None]:
+    """``RAYTRAD_RAYS`` set to ``kind`` for the occluders made meanwhile."""
+    before = os.environ.get(embree.RAYS_VARIABLE)
+    os.environ[embree.RAYS_VARIABLE] = kind
+    try:
+        yield
+    finally:
+        if before is None:
+            del os.environ[embree.RAYS_VARIABLE]
+        else:
+            os.environ[embree.RAYS_VARIABLE] = before
 
 
 def _dense(engine: object, patch: int) -> np.ndarray:
@@ -190,7 +235,7 @@ def _dense(engine: object, patch: int) -> np.ndarray:
 
 
 def replay(occluder: Occluder, batches: list) -> tuple[float, int]:
-    """Seconds for embreex to answer the recorded occlusion queries (same threads)."""
+    """Seconds for ``occluder`` to answer the recorded occlusion queries (same threads)."""
     start = time.perf_counter()
     rays = 0
     for o, d, t in batches:
@@ -238,13 +283,13 @@ def pass_table(receivers: int, with_numpy: bool = True) -> None:
         solve_numpy = _solve_seconds(prepared, solver.numpy_shoot)[0] if with_numpy else None
     finally:
         prepared.close()
-    embree, rays = _replayed(receivers, cull=True)
+    single, packets, rays = _replayed(receivers, cull=True)
     every_seconds, every, _ = timed_pass(receivers, record=False, cull=False)
     try:
         every_worst = _worst(every, factors)
     finally:
         every.close()
-    every_embree, every_rays = _replayed(receivers, cull=False)
+    every_embree, every_packets, every_rays = _replayed(receivers, cull=False)
     shafts_seconds, shafts_only, _ = timed_pass(receivers, record=False, convex=False)
     shafts_rays = shafts_only.engine.rays_cast  # type: ignore[attr-defined]
     shafts_worst = _worst(shafts_only, factors)
@@ -255,11 +300,16 @@ def pass_table(receivers: int, with_numpy: bool = True) -> None:
         f"({prepared.mesh.receiver_count} receivers, {prepared.mesh.patch_count} patches; "
         f"naive count receivers x samples: {naive:.3g} rays)"
     )
-    print("| pass | seconds | rays | rays / naive | raw Embree on every ray / pass |")
-    print("|---|---|---|---|---|")
+    print(
+        "| pass | seconds | rays | rays / naive | raw embreex on every ray / pass | raw "
+        "Embree packets on every ray / pass |"
+    )
+    print("|---|---|---|---|---|---|")
     rows = [
         ("raw embreex occlusion, every ray of the unculled pass", every_embree, every_rays),
-        ("raw embreex occlusion, the default pass's rays", embree, rays),
+        ("raw embreex occlusion, the default pass's rays", single, rays),
+        ("raw Embree packets, every ray of the unculled pass", every_packets, every_rays),
+        ("raw Embree packets, the default pass's rays", packets, rays),
         (
             "raytrad pass, every pair traced (no shaft culling, no blockers)",
             every_seconds,
@@ -273,7 +323,7 @@ def pass_table(receivers: int, with_numpy: bool = True) -> None:
     for name, took, count in rows:
         print(
             f"| {name} | {took:.2f} | {count:.3g} | {count / naive:.2f} | "
-            f"{100 * every_embree / took:.0f}% |"
+            f"{100 * every_embree / took:.0f}% | {100 * every_packets / took:.0f}% |"
         )
     numpy_text = "" if numpy_row is None else f"compiled / numpy: {seconds / numpy_row[0]:.2f}; "
     print(

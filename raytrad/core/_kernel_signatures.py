@@ -57,6 +57,17 @@ SIGNATURES: dict[str, list[list[str]]] = {
             "Array(float64, 1, 'C', False, aligned=True)",
         ],
     ],
+    "intersect_packets": [
+        [
+            "int64",
+            "Array(float32, 2, 'C', False, aligned=True)",
+            "Array(float32, 2, 'C', False, aligned=True)",
+            "Array(int64, 1, 'C', False, aligned=True)",
+            "Array(float64, 1, 'C', False, aligned=True)",
+            "Array(float64, 1, 'C', False, aligned=True)",
+            "Array(float64, 1, 'C', False, aligned=True)",
+        ],
+    ],
     "near_triangles": [
         [
             "Array(bool, 2, 'C', False, aligned=True)",
@@ -87,6 +98,15 @@ SIGNATURES: dict[str, list[list[str]]] = {
             "Array(int64, 2, 'C', False, aligned=True)",
             "Array(float64, 2, 'C', False, aligned=True)",
             "int64",
+        ],
+    ],
+    "occluded_packets": [
+        [
+            "int64",
+            "Array(float32, 2, 'C', False, aligned=True)",
+            "Array(float32, 2, 'C', False, aligned=True)",
+            "Array(float32, 1, 'C', False, aligned=True)",
+            "Array(bool, 1, 'C', False, aligned=True)",
         ],
     ],
     "patch_average": [
@@ -222,15 +242,19 @@ SIGNATURES: dict[str, list[list[str]]] = {
             "Tuple((Tuple((Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True))), Array(float64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int64, 2, 'C', False, aligned=True), Array(float64, 3, 'C', False, aligned=True), Array(float64, 2, 'C', False, aligned=True), Array(int64, 1, 'C', False, aligned=True), int64, Array(float64, 2, 'C', False, aligned=True), Array(float64, 1, 'C', False, aligned=True)))",
         ],
     ],
-    "visibility_rays": [
+    "traced_samples": [
         [
+            "int64",
             "Array(float64, 2, 'C', False, aligned=True)",
             "Array(bool, 2, 'C', False, aligned=True)",
+            "Array(bool, 1, 'C', False, aligned=True)",
             "Array(float64, 2, 'C', False, aligned=True)",
             "Array(int64, 1, 'C', False, aligned=True)",
             "Array(float64, 2, 'C', False, aligned=True)",
             "Array(float64, 1, 'C', False, aligned=True)",
             "float64",
+            "Array(bool, 2, 'C', False, aligned=True)",
+            "Array(bool, 1, 'C', False, aligned=True)",
         ],
     ],
     "visible_factors": [
@@ -247,20 +271,22 @@ SIGNATURES: dict[str, list[list[str]]] = {
 }
 
 SECONDS: dict[str, float] = {
-    "block_irradiance": 0.25,
-    "blocked_pairs": 1.76,
+    "block_irradiance": 0.26,
+    "blocked_pairs": 1.73,
     "column_final": 0.08,
     "column_sweep": 0.14,
-    "near_triangles": 3.83,
-    "node_means": 0.90,
-    "patch_average": 0.28,
+    "intersect_packets": 0.99,
+    "near_triangles": 3.75,
+    "node_means": 0.87,
+    "occluded_packets": 0.98,
+    "patch_average": 0.27,
     "patch_spread_rows": 0.20,
-    "piecewise_contour_form_factor": 1.65,
-    "planar_contour_form_factor": 1.46,
+    "piecewise_contour_form_factor": 1.48,
+    "planar_contour_form_factor": 1.21,
     "sample_weights": 0.51,
-    "shaft_clear": 1.49,
-    "shoot": 1.28,
-    "spread_chunk": 5.03,
-    "visibility_rays": 0.62,
-    "visible_factors": 0.47,
+    "shaft_clear": 1.29,
+    "shoot": 1.26,
+    "spread_chunk": 4.44,
+    "traced_samples": 1.69,
+    "visible_factors": 0.41,
 }

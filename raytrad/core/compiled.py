@@ -83,12 +83,12 @@ def _dispatchers(numba: Any) -> dict[str, Any]:
         _compiled_gather,
         _compiled_kernels,
         _compiled_near,
+        _compiled_rays,
         _compiled_segments,
         _compiled_shafts,
         _compiled_solver,
     )
 
-    kernels = {}
     modules = (
         _compiled_kernels,
         _compiled_near,
@@ -96,14 +96,68 @@ def _dispatchers(numba: Any) -> dict[str, Any]:
         _compiled_shafts,
         _compiled_solver,
         _compiled_segments,
+        _compiled_rays,
     )
+    link_embree(numba)
+    kernels = {}
     for loops in modules:
-        borrowing = getattr(loops, "BORROWING", ())
-        for name in loops.KERNELS:
-            if not hasattr(getattr(loops, name), "py_func"):  # not compiled yet
-                setattr(loops, name, _jit(numba, getattr(loops, name), name in borrowing))
-            kernels[name] = getattr(loops, name)
+        kernels.update(_bind(numba, loops, loops.KERNELS))
     return kernels
+
+
+def link_embree(numba: Any) -> None:
+    """Give :mod:`raytrad.core._compiled_rays` Embree's packet functions as numba
+    external functions, before its loops are compiled: the library embreex ships
+    (:func:`raytrad.core.embree.library_path`) loaded into LLVM's symbol table, where
+    numba's linker finds ``rtcOccluded8`` and ``rtcIntersect8`` by name (also for loops
+    loaded from its cache). Nothing when the library is not usable (the module then has
+    no loops)."""
+    from raytrad.core import _compiled_rays, embree
+
+    if not _compiled_rays.KERNELS or _compiled_rays._occluded8 is not None:
+        return
+    import llvmlite.binding
+
+    llvmlite.binding.load_library_permanently(embree.library_path())
+    pointer = numba.types.uintp
+    signature = numba.types.void(pointer, pointer, pointer, pointer)
+    _compiled_rays._intersect8 = numba.types.ExternalFunction("rtcIntersect8", signature)
+    _compiled_rays._occluded8 = numba.types.ExternalFunction("rtcOccluded8", signature)
+
+
+def _bind(numba: Any, loops: Any, names: tuple[str, ...]) -> dict[str, Any]:
+    """The loops ``names`` of module ``loops`` wrapped by :func:`_jit` where not yet (and
+    rebound in the module, so that later loops call them compiled), by name."""
+    borrowing = getattr(loops, "BORROWING", ())
+    bound = {}
+    for name in names:
+        if not hasattr(getattr(loops, name), "py_func"):  # not compiled yet
+            setattr(loops, name, _jit(numba, getattr(loops, name), name in borrowing))
+        bound[name] = getattr(loops, name)
+    return bound
+
+
+def rays() -> SimpleNamespace | None:
+    """The packet loops of :mod:`raytrad.core._compiled_rays` alone (and the helper they
+    share with the pass's rays), loaded from numba's cache or compiled on first use
+    without the other kernels: an :class:`~raytrad.core.visibility.Occluder` traces rays
+    while the mesh is built, before :func:`get` compiles the rest (a scene that cannot be
+    solved fails first). None where :func:`wanted` is False. Thread-safe."""
+    if not wanted():
+        return None
+    if "rays" in _STATE:
+        return _STATE["rays"]
+    with _LOCK:
+        if "rays" not in _STATE:
+            import numba
+
+            from raytrad.core import _compiled_kernels, _compiled_rays
+
+            link_embree(numba)
+            _bind(numba, _compiled_kernels, ("_segment",))
+            loops = _bind(numba, _compiled_rays, _compiled_rays.KERNELS)
+            _STATE["rays"] = SimpleNamespace(**loops)
+    return _STATE["rays"]
 
 
 def compilers() -> int:

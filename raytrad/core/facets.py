@@ -41,14 +41,30 @@ KEPT_FACETS = 128
 #: ... and the others are gathered into at most this many volumes. A volume has no side
 #: bits, so every pair tests it: few volumes keep the tests per pair few.
 VOLUMES = 16
+#: The two limits above where rays go through Embree's packets
+#: (:mod:`raytrad.core.embree`), whose rays cost about half as much, so culling pays in
+#: fewer scenes. Culled over unculled pass time with packets (2026-12-05,
+#: ``tools/bench_performance.py --receivers 10000``, one run each): the Cornell box (17
+#: facets) 0.73 (at 20 000), rooms of 2 x 2, 3 x 3, 4 x 4 and 6 x 6 turned blocks (27, 52,
+#: 87 and 187 facets) 0.88, 1.01, 1.07 and 1.23; past the facets, with volumes, a ball in
+#: a box (17 large facets) 0.97 and the cluttered room (72 large facets) 1.17.
+PACKET_FACETS = 48
+#: ... and past :data:`PACKET_FACETS`, the most large facets kept (see :data:`KEPT_FACETS`).
+PACKET_KEPT = 32
 #: Normals within this of each other [1] and plane offsets within this x the scene
 #: diagonal fall in one coplanar group before the exact planarity check.
 _NORMAL_GRID = 1e-6
 
 
-def facets(positions: np.ndarray, triangles: np.ndarray, diagonal: float) -> Facets | None:
-    """The planar facets of the blocking triangles, and in a scene of more than
-    :data:`MAX_FACETS` of them, volumes that stand for the small ones.
+def facets(
+    positions: np.ndarray,
+    triangles: np.ndarray,
+    diagonal: float,
+    most: int = MAX_FACETS,
+    kept: int = KEPT_FACETS,
+) -> Facets | None:
+    """The planar facets of the blocking triangles, and in a scene of more than ``most``
+    (:data:`MAX_FACETS`) of them, volumes that stand for the small ones.
 
     Triangles are grouped by their plane (normal and offset on a fine grid); a triangle
     whose corners are not all within ``tol.horizon`` x ``diagonal`` of its group's plane
@@ -56,11 +72,12 @@ def facets(positions: np.ndarray, triangles: np.ndarray, diagonal: float) -> Fac
     area block nothing and are left out.
 
     A curved or finely tessellated surface makes a facet of every triangle. Past
-    :data:`MAX_FACETS`, the facets whose bounding sphere reaches :data:`LARGE_FACET` of the
+    ``most``, the facets whose bounding sphere reaches :data:`LARGE_FACET` of the
     diagonal (walls, table tops, the faces of boxes) stay facets, and the others are
     gathered by bisection into at most :data:`VOLUMES` *volumes* (:func:`_volumes`);
-    with more than :data:`KEPT_FACETS` large facets (a room of many boxes) the tests
-    would cost more than the rays they save, and the scene is not culled (None).
+    with more than ``kept`` (:data:`KEPT_FACETS`) large facets (a room of many boxes)
+    the tests would cost more than the rays they save, and the scene is not culled
+    (None). Rays in Embree's packets take :data:`PACKET_FACETS` and :data:`PACKET_KEPT`.
 
     A volume has no plane (its normal is 0, so no side bit is ever set for it, and the
     pyramid test, which needs a plane, never runs), a bounding sphere holding its
@@ -74,6 +91,8 @@ def facets(positions: np.ndarray, triangles: np.ndarray, diagonal: float) -> Fac
     triangles : (T, 3) int
     diagonal : float
         The scene's diagonal [m].
+    most, kept : int
+        The limits above; ``most`` at most :data:`MAX_FACETS` (the side bits' words).
 
     Returns
     -------
@@ -94,15 +113,15 @@ def facets(positions: np.ndarray, triangles: np.ndarray, diagonal: float) -> Fac
     radius = _group_radius(corners, group, center, count)
     planar = np.ones(count, dtype=bool)
     volume = np.full(count, -1, dtype=np.int64)
-    if count > MAX_FACETS:
-        if np.count_nonzero(radius >= LARGE_FACET * diagonal) > KEPT_FACETS:
-            log.debug("%d facets, more than %d of them large: no shaft culling", count, KEPT_FACETS)
+    if count > min(most, MAX_FACETS):
+        if np.count_nonzero(radius >= LARGE_FACET * diagonal) > kept:
+            log.debug("%d facets, more than %d of them large: no shaft culling", count, kept)
             return None
         planar, volume = _split(radius, lo, hi, diagonal)
         log.debug(
             "%d facets > %d: %d kept, the rest in %d volumes",
             count,
-            MAX_FACETS,
+            most,
             int(planar.sum()),
             volume.max(initial=-1) + 1,
         )
@@ -199,7 +218,7 @@ def _plane_hulls(
 def _split(
     radius: np.ndarray, lo: np.ndarray, hi: np.ndarray, diagonal: float
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Which facets stay facets in a scene of more than :data:`MAX_FACETS` (see
+    """Which facets stay facets in a scene of more facets than the limit (see
     :func:`facets`), and the volume of each of the others.
 
     Returns
@@ -251,4 +270,12 @@ def _extent(lo: np.ndarray, hi: np.ndarray, members: np.ndarray) -> float:
     return float(np.linalg.norm(hi[members].max(axis=0) - lo[members].min(axis=0)))
 
 
-__all__ = ["KEPT_FACETS", "LARGE_FACET", "MAX_FACETS", "VOLUMES", "facets"]
+__all__ = [
+    "KEPT_FACETS",
+    "LARGE_FACET",
+    "MAX_FACETS",
+    "PACKET_FACETS",
+    "PACKET_KEPT",
+    "VOLUMES",
+    "facets",
+]

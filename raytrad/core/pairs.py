@@ -26,7 +26,7 @@ from raytrad.core import compiled
 from raytrad.core.blockers import Blockers, blockers, target_corners
 from raytrad.core.clusters import disk_factors, runs
 from raytrad.core.contour import piecewise_contour_form_factor, planar_contour_form_factor
-from raytrad.core.facets import facets
+from raytrad.core.facets import PACKET_FACETS, PACKET_KEPT, facets
 from raytrad.core.gather import (
     EMPTY,
     GATHER_RADII,
@@ -96,7 +96,9 @@ class PairFactors:
         self.facets: Facets | None = None
         # the shaft test pays only compiled: its numpy reference costs more than the rays
         if cull and occluder is not None and compiled.get() is not None:
-            self.facets = facets(occluder.positions, occluder.triangles, diagonal)
+            # cheaper rays (Embree's packets) leave culling fewer scenes where it pays
+            limits = (PACKET_FACETS, PACKET_KEPT) if occluder.packets else ()
+            self.facets = facets(occluder.positions, occluder.triangles, diagonal, *limits)
         if self.facets is not None:
             lift = tol.ray_offset * diagonal
             self._patch_sides = np.stack(
@@ -285,10 +287,38 @@ class PairFactors:
         near_hidden : (B,) bool, blocked near items (triangles and clusters)
         rays : int
         """
+        if self.occluder is None or not doubt.any():
+            return unoccluded, np.zeros(far.shape, bool), np.zeros(len(near_c), bool), 0
+        shorten = 0.5 * tol.ray_offset * self.diagonal
+        if self.occluder.packets:  # made and traced in one compiled loop
+            far_hidden, near_hidden, rays = self.occluder.occluded_samples(
+                origins, far, doubt, self._sub_target[sub], near_c, near_target, shorten
+            )
+        else:
+            far_hidden, near_hidden, rays = self._traced(
+                origins, far, doubt, sub, near_c, near_target, shorten
+            )
+        factors = visible_factors(
+            unoccluded, doubt, weight, far_hidden, near_c, near_w, near_hidden
+        )
+        return factors, far_hidden, near_hidden, rays
+
+    def _traced(
+        self,
+        origins: np.ndarray,
+        far: np.ndarray,
+        doubt: np.ndarray,
+        sub: slice,
+        near_c: np.ndarray,
+        near_target: np.ndarray,
+        shorten: float,
+    ) -> tuple[np.ndarray, np.ndarray, int]:
+        """(far_hidden, near_hidden, rays) as :meth:`Occluder.occluded_samples` gives them,
+        from the rays written out (:func:`visibility_rays`) and traced by
+        :meth:`Occluder.occluded_local` (embreex, or the numpy kernels)."""
+        assert self.occluder is not None
         far_hidden = np.zeros(far.shape, dtype=bool)  # C order: written through a flat view
         near_hidden = np.zeros(len(near_c), dtype=bool)
-        if self.occluder is None or not doubt.any():
-            return unoccluded, far_hidden, near_hidden, 0
         traced = doubt[near_c]
         o, d, t, far_c, far_s = visibility_rays(
             origins,
@@ -297,17 +327,14 @@ class PairFactors:
             near_c[traced],
             np.compress(traced, near_target, axis=0),
             self.occluder.origin,
-            0.5 * tol.ray_offset * self.diagonal,
+            shorten,
         )
         blocked = self.occluder.occluded_local(o, d, t)
         count = len(far_c)
         flat = (far_c * far.shape[1] + far_s)[blocked[:count]]  # flat: faster than 2-D
         far_hidden.reshape(-1)[flat] = True
         near_hidden[np.flatnonzero(traced)[blocked[count:]]] = True
-        factors = visible_factors(
-            unoccluded, doubt, weight, far_hidden, near_c, near_w, near_hidden
-        )
-        return factors, far_hidden, near_hidden, len(blocked)
+        return far_hidden, near_hidden, len(blocked)
 
     def _samples(
         self, x: np.ndarray, nx: np.ndarray, sees: np.ndarray, sub: slice

@@ -7,6 +7,7 @@ precision as one at the origin; every query point goes through the same shift.
 
 from __future__ import annotations
 
+import importlib.util
 import itertools
 import logging
 import math
@@ -15,12 +16,13 @@ import threading
 from collections import deque
 from collections.abc import Callable, Iterable, Iterator
 from concurrent.futures import Executor, ThreadPoolExecutor
-from typing import TypeVar
+from typing import Any, TypeVar
 
 import numpy as np
 
 from raytrad.arrays import unique
 from raytrad.constants import scene_diagonal, tol
+from raytrad.core import compiled, embree
 
 log = logging.getLogger(__name__)
 
@@ -110,14 +112,14 @@ class Occluder:
 
     Notes
     -----
-    ``embreex.EmbreeScene.run`` releases the GIL, so batches run on all cores from a thread
-    pool; each call gets at most :data:`RAY_CHUNK` rays, so memory stays bounded.
+    Rays go through Embree's 8-ray packets (:mod:`raytrad.core.embree`, about twice as
+    fast on coherent rays) where the library embreex ships is found, else through
+    embreex's ``EmbreeScene.run``; both answer the same queries with the same answers.
+    Either releases the GIL, so batches run on all cores from a thread pool; each call
+    gets at most :data:`RAY_CHUNK` rays, so memory stays bounded.
     """
 
     def __init__(self, positions: np.ndarray, triangles: np.ndarray, robust: bool = False):
-        from embreex import rtcore_scene
-        from embreex.mesh_construction import TriangleMesh
-
         positions = np.asarray(positions, dtype=np.float64)
         #: The blocking geometry, world coordinates (for shaft culling).
         self.positions, self.triangles = positions, np.asarray(triangles)
@@ -125,20 +127,20 @@ class Occluder:
         lo, hi = positions[used].min(axis=0), positions[used].max(axis=0)
         self.origin = 0.5 * (lo + hi)
         self.diagonal = scene_diagonal(np.stack([lo, hi]))
-        self._scene = rtcore_scene.EmbreeScene(robust=robust)
         local = np.ascontiguousarray(positions - self.origin, dtype=np.float32)
-        TriangleMesh(self._scene, local, np.ascontiguousarray(triangles, dtype=np.int32))
+        self._packets = _packet_scene(local, self.triangles, robust)
+        if self._packets is None:
+            self._scene = _embreex_scene(local, self.triangles, robust)
         self._workers = worker_count()
         self._pool: ThreadPoolExecutor | None = None
         self._lock = threading.Lock()
         self.rays_cast = 0
-        # the first query commits (builds) the BVH; do it now so timings are honest
-        self._scene.run(
-            np.zeros((1, 3), np.float32),
-            np.full((1, 3), 3.0**-0.5, np.float32),
-            dists=np.zeros(1, np.float32),
-            query="OCCLUDED",
-        )
+
+    @property
+    def packets(self) -> bool:
+        """Whether rays go through Embree's packets (:mod:`raytrad.core.embree`), not
+        embreex's single-ray queries."""
+        return self._packets is not None
 
     def close(self) -> None:
         if self._pool is not None:
@@ -190,6 +192,64 @@ class Occluder:
         )
         return np.concatenate(list(parts))
 
+    def occluded_samples(
+        self,
+        origins: np.ndarray,
+        far: np.ndarray,
+        doubt: np.ndarray,
+        targets: np.ndarray,
+        near_receivers: np.ndarray,
+        near_targets: np.ndarray,
+        shorten: float,
+    ) -> tuple[np.ndarray, np.ndarray, int]:
+        """A chunk's visibility rays, made and traced in Embree's packets without being
+        written out (only when :attr:`packets`; :func:`~raytrad.core.kernels.visibility_rays`
+        and :meth:`occluded_local` answer the same otherwise).
+
+        Parameters
+        ----------
+        origins : (C, 3) float64
+            World ray origins of the chunk's receivers [m].
+        far : (C, S) bool
+            (receiver, sample) pairs to trace, of the receivers in ``doubt`` (C,) bool.
+        targets : (S, 3) float64
+            The samples' ray targets [m].
+        near_receivers : (B,) int64
+            Chunk receiver of each near item; traced when it is in ``doubt``.
+        near_targets : (B, 3) float64
+            Its target [m].
+        shorten : float
+            Each ray stops this short of its target [m].
+
+        Returns
+        -------
+        far_hidden : (C, S) bool
+            Blocked far samples.
+        near_hidden : (B,) bool
+            Blocked near items.
+        rays : int
+        """
+        if self._packets is None:
+            raise RuntimeError("occluded_samples needs Embree's packets (Occluder.packets)")
+        far_hidden = np.zeros(far.shape, dtype=bool)
+        near_hidden = np.zeros(len(near_receivers), dtype=bool)
+        rays = _loops().traced_samples(
+            self._packets.pointer,
+            origins,
+            far,
+            doubt,
+            targets,
+            near_receivers,
+            near_targets,
+            self.origin,
+            shorten,
+            far_hidden,
+            near_hidden,
+        )
+        with self._lock:
+            self.rays_cast += rays
+        return far_hidden, near_hidden, int(rays)
+
     def _threads(self) -> ThreadPoolExecutor:
         """The pool the batches run on (made on first use; never called from its own
         threads, whose batches would wait for each other)."""
@@ -200,6 +260,9 @@ class Occluder:
 
     def _run(self, o: np.ndarray, d: np.ndarray, t: np.ndarray) -> np.ndarray:
         out = np.empty(len(o), dtype=bool)
+        if self._packets is not None:
+            _loops().occluded_packets(self._packets.pointer, o, d, t, out)
+            return out
         for start in range(0, len(o), RAY_CHUNK):
             stop = start + RAY_CHUNK
             hit = self._scene.run(
@@ -254,6 +317,11 @@ class Occluder:
         weights only when asked for ((0, 3) otherwise: a probe needs none)."""
         triangle = np.empty(len(o), dtype=np.int64)
         distance = np.empty(len(o))
+        if self._packets is not None:
+            u, v = np.empty(len(o)), np.empty(len(o))
+            _loops().intersect_packets(self._packets.pointer, o, d, triangle, distance, u, v)
+            weights = np.stack([1.0 - u - v, u, v], axis=1) if barycentric else np.zeros((0, 3))
+            return triangle, distance, weights
         weights = np.zeros((len(o) if barycentric else 0, 3))
         for start in range(0, len(o), RAY_CHUNK):
             stop = start + RAY_CHUNK
@@ -391,6 +459,50 @@ class Occluder:
         direction = delta / np.maximum(length, 1e-300)[:, None]
         margin = tol.ray_margin * self.diagonal
         return self.occluded_local(a, direction, np.maximum(length - margin, 0.0))
+
+
+def _packet_scene(
+    local: np.ndarray, triangles: np.ndarray, robust: bool
+) -> embree.PacketScene | None:
+    """An Embree scene for packet queries (:mod:`raytrad.core.embree`), or None where
+    they cannot be had: numba's kernels off or missing, the library not found,
+    ``RAYTRAD_RAYS=embreex``, or Embree refusing the scene (logged; embreex then answers
+    the same queries). The compiled loops load on the first query
+    (:func:`raytrad.core.compiled.rays`)."""
+    if not compiled.wanted() or importlib.util.find_spec("numba") is None:
+        return None
+    if not embree.available():
+        return None
+    try:
+        return embree.PacketScene(local, triangles, robust)
+    except OSError as error:
+        log.warning("Embree's packets failed (%s): rays go through embreex", error)
+        return None
+
+
+def _loops() -> Any:
+    """The compiled packet loops (an occluder with packets exists only where they can
+    be had)."""
+    loops = compiled.rays()
+    assert loops is not None and hasattr(loops, "traced_samples")
+    return loops
+
+
+def _embreex_scene(local: np.ndarray, triangles: np.ndarray, robust: bool) -> Any:
+    """embreex's scene of the triangles, its BVH built now (the first query commits it),
+    so that timings are honest."""
+    from embreex import rtcore_scene
+    from embreex.mesh_construction import TriangleMesh
+
+    scene = rtcore_scene.EmbreeScene(robust=robust)
+    TriangleMesh(scene, local, np.ascontiguousarray(triangles, dtype=np.int32))
+    scene.run(
+        np.zeros((1, 3), np.float32),
+        np.full((1, 3), 3.0**-0.5, np.float32),
+        dists=np.zeros(1, np.float32),
+        query="OCCLUDED",
+    )
+    return scene
 
 
 def nothing_can_occlude(positions: np.ndarray, triangles: np.ndarray, tolerance: float) -> bool:

@@ -247,7 +247,9 @@ def blocks_room(blocks_per_side: int = 6, seed: int = 1) -> Scene:
     touch. Each block is five quads (top and sides; its foot is open, as a crate's).
     The same ``seed`` gives the same scene. A test of many occluders and contact
     outlines: 36 blocks give 187 planar facets (the default), within the shaft
-    culling's limit (:data:`raytrad.core.facets.MAX_FACETS`); 8 x 8 give 327, past it.
+    culling's limit for single-ray queries (:data:`raytrad.core.facets.MAX_FACETS`) and
+    past the one for Embree's packets (:data:`~raytrad.core.facets.PACKET_FACETS`); 8 x
+    8 give 327, past both.
 
     Parameters
     ----------

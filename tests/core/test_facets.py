@@ -7,7 +7,19 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from raytrad.core.facets import KEPT_FACETS, LARGE_FACET, MAX_FACETS, VOLUMES, facets
+from raytrad.core.embree import RAYS_VARIABLE
+from raytrad.core.facets import (
+    KEPT_FACETS,
+    LARGE_FACET,
+    MAX_FACETS,
+    PACKET_FACETS,
+    PACKET_KEPT,
+    VOLUMES,
+    facets,
+)
+from raytrad.core.mesh import MeshSettings
+from raytrad.core.pipeline import prepare
+from raytrad.scene.builtin import blocks_room
 
 CUBE = np.array([[x, y, z] for x in (0.0, 1.0) for y in (0.0, 1.0) for z in (0.0, 1.0)])
 # the cube's 6 faces as 12 triangles (corner index = 4x + 2y + z)
@@ -107,3 +119,25 @@ def test_small_facets_past_the_limit_are_gathered_into_volumes() -> None:
     words = found.words
     for q in np.flatnonzero(volume):  # front bits in words 0..W-1, behind in W..2W-1
         assert not bits[:, q].any() and not bits[:, 64 * words + q].any()
+
+
+def test_rays_in_packets_cull_rooms_of_fewer_facets(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Embree's packets halve a ray's cost, so the pass culls up to PACKET_FACETS facets
+    (and past them keeps at most PACKET_KEPT large ones); single-ray queries keep the
+    wider limits. Rooms of 2 x 2 and 3 x 3 blocks have 27 and 52 facets, all but one
+    large."""
+    assert PACKET_FACETS < MAX_FACETS and PACKET_KEPT < KEPT_FACETS
+    small, larger = blocks_room(2), blocks_room(3)
+    for scene, count in ((small, 27), (larger, 52)):
+        found = facets(scene.positions, scene.triangles, 6.4)
+        assert found is not None and found.count == count
+    assert facets(small.positions, small.triangles, 6.4, PACKET_FACETS, PACKET_KEPT) is not None
+    assert facets(larger.positions, larger.triangles, 6.4, PACKET_FACETS, PACKET_KEPT) is None
+    for rays, culled in (("packets", False), ("embreex", True)):
+        monkeypatch.setenv(RAYS_VARIABLE, rays)
+        prepared = prepare(larger, MeshSettings(receivers=400, patches=60))
+        try:
+            assert prepared.occluder is not None and prepared.occluder.packets == (not culled)
+            assert (prepared.engine._pairs.facets is not None) == culled
+        finally:
+            prepared.close()

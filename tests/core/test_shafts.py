@@ -9,14 +9,15 @@ the culled pass gives the unculled pass's factors and gather weights.
 
 from __future__ import annotations
 
+import contextlib
 from collections.abc import Iterator
 
 import numpy as np
 import pytest
 
-from raytrad.core import compiled, shafts
+from raytrad.core import compiled, pairs, shafts
 from raytrad.core.blockers import target_corners
-from raytrad.core.facets import MAX_FACETS, VOLUMES, facets
+from raytrad.core.facets import KEPT_FACETS, MAX_FACETS, VOLUMES, facets
 from raytrad.core.formfactor import FormFactorEngine
 from raytrad.core.mesh import MeshSettings
 from raytrad.core.pipeline import Prepared, prepare
@@ -184,24 +185,42 @@ def test_constructed_cases_are_clear_only_where_no_segment_is_blocked(case: str)
 def room(request: pytest.FixtureRequest) -> Iterator[Prepared]:
     """Rooms of furniture, the bundled room of 36 blocks (187 facets, culled since the
     limit rose past 128), and a room with a ball of 1 280 triangles (its facets in
-    volumes)."""
-    if request.param == "blocks":
+    volumes); all culled under the limits of single-ray queries, which reach past the
+    packets' (:data:`~raytrad.core.facets.PACKET_FACETS`), so that the test reaches
+    those rooms."""
+    with _single_ray_limits():
+        prepared = _room(request.param)
+    yield prepared
+    prepared.close()
+
+
+@contextlib.contextmanager
+def _single_ray_limits() -> Iterator[None]:
+    """The pass culls under the facet limits of single-ray queries meanwhile."""
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(pairs, "PACKET_FACETS", MAX_FACETS)
+        patch.setattr(pairs, "PACKET_KEPT", KEPT_FACETS)
+        yield
+
+
+def _room(kind: int | str) -> Prepared:
+    if kind == "blocks":
         prepared = prepare(blocks_room(6), MeshSettings(receivers=1200, patches=160))
         assert prepared.engine._pairs.facets.count > 128
-    elif request.param == "ball":
+    elif kind == "ball":
         prepared = prepare(ball_room(), MeshSettings(receivers=1500, patches=120))
         assert (prepared.engine._pairs.facets.normal == 0).all(axis=1).sum() == VOLUMES
     else:
-        scene = furniture_room(request.param)
-        prepared = prepare(scene, MeshSettings(receivers=1500, patches=120))
-    yield prepared
-    prepared.close()
+        prepared = prepare(furniture_room(int(kind)), MeshSettings(receivers=1500, patches=120))
+        assert prepared.engine._pairs.facets is not None
+    return prepared
 
 
 @pytest.mark.skipif(compiled.get() is None, reason="culling runs with compiled kernels only")
 def test_clear_pairs_have_no_blocked_segment(room: Prepared) -> None:
     """Embree, not the culling code, checks 64 random segments of every clear pair."""
-    engine = FormFactorEngine(room.mesh, room.occluder)
+    with _single_ray_limits():
+        engine = FormFactorEngine(room.mesh, room.occluder)
     pairs, mesh = engine._pairs, room.mesh
     assert pairs.facets is not None
     rng = np.random.default_rng(0)
@@ -237,7 +256,8 @@ def test_culled_pass_equals_tracing_every_pair(scene: str, room: Prepared, prepa
     prepared = (
         room if scene == "room" else prepare_scene(shadow_scene(), MeshSettings(receivers=1200))
     )
-    culled = FormFactorEngine(prepared.mesh, prepared.occluder)
+    with _single_ray_limits():
+        culled = FormFactorEngine(prepared.mesh, prepared.occluder)
     every = FormFactorEngine(prepared.mesh, prepared.occluder, cull=False)
     try:
         for a, b in zip(_columns(culled), _columns(every), strict=True):
