@@ -61,7 +61,7 @@ def facets(
     triangles: np.ndarray,
     diagonal: float,
     most: int = MAX_FACETS,
-    kept: int = KEPT_FACETS,
+    most_large: int = KEPT_FACETS,
 ) -> Facets | None:
     """The planar facets of the blocking triangles, and in a scene of more than ``most``
     (:data:`MAX_FACETS`) of them, volumes that stand for the small ones.
@@ -75,7 +75,7 @@ def facets(
     ``most``, the facets whose bounding sphere reaches :data:`LARGE_FACET` of the
     diagonal (walls, table tops, the faces of boxes) stay facets, and the others are
     gathered by bisection into at most :data:`VOLUMES` *volumes* (:func:`_volumes`);
-    with more than ``kept`` (:data:`KEPT_FACETS`) large facets (a room of many boxes)
+    with more than ``most_large`` (:data:`KEPT_FACETS`) large facets (a room of many boxes)
     the tests would cost more than the rays they save, and the scene is not culled
     (None). Rays in Embree's packets take :data:`PACKET_FACETS` and :data:`PACKET_KEPT`.
 
@@ -91,7 +91,7 @@ def facets(
     triangles : (T, 3) int
     diagonal : float
         The scene's diagonal [m].
-    most, kept : int
+    most, most_large : int
         The limits above; ``most`` at most :data:`MAX_FACETS` (the side bits' words).
 
     Returns
@@ -114,8 +114,8 @@ def facets(
     planar = np.ones(count, dtype=bool)
     volume = np.full(count, -1, dtype=np.int64)
     if count > min(most, MAX_FACETS):
-        if np.count_nonzero(radius >= LARGE_FACET * diagonal) > kept:
-            log.debug("%d facets, more than %d of them large: no shaft culling", count, kept)
+        if np.count_nonzero(radius >= LARGE_FACET * diagonal) > most_large:
+            log.debug("%d facets, more than %d large: no shaft culling", count, most_large)
             return None
         planar, volume = _split(radius, lo, hi, diagonal)
         log.debug(
