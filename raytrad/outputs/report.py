@@ -18,6 +18,7 @@ from raytrad.core.adaptive import Refinement
 from raytrad.core.convergence import ErrorLog, Reference
 from raytrad.core.pipeline import Prepared
 from raytrad.core.solver import SolveResult
+from raytrad.core.visibility import Occluder
 from raytrad.formats.atomic import atomic_write
 from raytrad.settings import RenderSettings
 
@@ -61,6 +62,7 @@ def build_report(
             "patches": mesh.patch_count,
             "subareas": mesh.subarea_count,
             "occlusion_tested": prepared.occluder is not None,
+            "ray_queries": _ray_queries(prepared.occluder),
             "form_factor_balance": prepared.balance,
         },
         "timings_seconds": timings,
@@ -85,6 +87,13 @@ def build_report(
         },
         "outputs": {k: str(v) for k, v in outputs.items()},
     }
+
+
+def _ray_queries(occluder: Occluder | None) -> str:
+    """How the run's rays were traced (``statistics.ray_queries``)."""
+    if occluder is None:
+        return "none"
+    return "packets" if occluder.packets else "embreex"
 
 
 def add_error_log(

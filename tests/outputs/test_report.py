@@ -106,6 +106,7 @@ def test_furnace_report_with_reference_matches_the_schema(
     out, report = furnace_run
     _validate(schema, load_strict(out / "report.json"))
     assert report["reference"]["kind"] == "analytic"
+    assert report["statistics"]["ray_queries"] == "none"  # a convex enclosure
     assert report["solve"]["stop_reason"] == "converged"
     assert report["refinement"]["stopped"] is False  # it ran to its end
 
@@ -116,6 +117,7 @@ def test_shadow_report_without_reference_matches_the_schema(
     _validate(schema, shadow_report)
     assert shadow_report["reference"] is None
     assert shadow_report["statistics"]["occlusion_tested"] is True
+    assert shadow_report["statistics"]["ray_queries"] == "packets"  # the library is found
     assert shadow_report["convergence"]["true_rms"] == []
     assert shadow_report["error"]["true_rms"] is None
 
