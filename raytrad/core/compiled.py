@@ -334,7 +334,8 @@ def compile_listed() -> None:
     kernels = _dispatchers(numba)
     _compile_ahead(numba, kernels)
     for name, signatures in SIGNATURES.items():
-        if not _cached(numba, kernels[name], signatures):
+        # a kernel this process lacks (the packet loops without Embree's library) is left
+        if name in kernels and not _cached(numba, kernels[name], signatures):
             _compile(numba, kernels[name], signatures)
 
 
