@@ -67,7 +67,7 @@ def _packet(words):
     bits = ray.view(np.uint32)
     for k in range(K):
         bits[_MASK + k] = _INVALID
-    return ray, bits, _aligned(K).view(np.int32)
+    return ray, bits, _aligned(np.int64(K)).view(np.int32)
 
 
 def _fill(ray, valid, origins, directions, start, count):
@@ -88,7 +88,7 @@ def _fill(ray, valid, origins, directions, start, count):
 def occluded_packets(scene, origins, directions, distances, out):
     """(N,) bool into ``out``: is something hit within ``distances`` along each float32
     ray (``origins``, unit ``directions``, (N, 3))? ``scene``: an ``RTCScene`` handle."""
-    ray, _, valid = _packet(12 * K)
+    ray, _, valid = _packet(np.int64(12 * K))
     n = len(origins)
     for start in range(0, n, K):
         count = min(K, n - start)
@@ -104,7 +104,7 @@ def intersect_packets(scene, origins, directions, triangle, distance, u, v):
     """The closest hit of each float32 ray (``tfar`` 1e37): into ``triangle`` (N,)
     int64 (-1 for a miss), ``distance`` (N,) float64 [m] (inf for a miss) and the hit's
     barycentric ``u``, ``v`` (N,) float64 (0 for a miss)."""
-    ray, words, valid = _packet(_WORDS)
+    ray, words, valid = _packet(np.int64(_WORDS))
     n = len(origins)
     for start in range(0, n, K):
         count = min(K, n - start)
@@ -130,7 +130,7 @@ def _lane(ray, k, a, b, shift, shorten, segment):
     direction and length rows), so that it is the very ray
     :func:`~raytrad.core._compiled_kernels.visibility_rays` would write."""
     origin, direction, length = segment
-    _k._segment(a, b, shift, shorten, origin, direction, length, 0)
+    _k._segment(a, b, shift, shorten, origin, direction, length, np.int64(0))
     ray[k], ray[K + k], ray[2 * K + k] = origin[0], origin[1], origin[2]
     ray[4 * K + k], ray[5 * K + k], ray[6 * K + k] = direction[0], direction[1], direction[2]
     ray[_TFAR + k] = length[0]
@@ -170,12 +170,13 @@ def traced_samples(
     each ray as :func:`~raytrad.core._compiled_kernels.visibility_rays` makes it (shifted
     by ``shift``, ``shorten`` short of its target). The blocked ones are marked True in
     ``far_hidden`` (C, S) and ``near_hidden`` (B,) bool; returns the rays cast."""
-    ray, _, valid = _packet(12 * K)
+    ray, _, valid = _packet(np.int64(12 * K))
     segment = (np.empty(3, np.float32), np.empty(3, np.float32), np.empty(1, np.float32))
     lane_c = np.empty(K, dtype=np.int64)
     lane_s = np.empty(K, dtype=np.int64)
-    lanes = 0
-    rays = 0
+    lanes = np.int64(0)  # counters as int64 from the start: no helper typed for a literal
+    rays = np.int64(0)
+    full = np.int64(K)
     for c in range(far.shape[0]):
         if not doubt[c]:
             continue
@@ -185,18 +186,18 @@ def traced_samples(
                 lane_c[lanes], lane_s[lanes] = c, s
                 lanes += 1
                 if lanes == K:
-                    _flush(scene, ray, valid, K, lane_c, lane_s, far_hidden, near_hidden)
-                    rays += K
-                    lanes = 0
+                    _flush(scene, ray, valid, full, lane_c, lane_s, far_hidden, near_hidden)
+                    rays += full
+                    lanes = np.int64(0)
     for b in range(len(near_c)):
         if doubt[near_c[b]]:
             _lane(ray, lanes, origins[near_c[b]], near_targets[b], shift, shorten, segment)
             lane_c[lanes], lane_s[lanes] = -1, b
             lanes += 1
             if lanes == K:
-                _flush(scene, ray, valid, K, lane_c, lane_s, far_hidden, near_hidden)
-                rays += K
-                lanes = 0
+                _flush(scene, ray, valid, full, lane_c, lane_s, far_hidden, near_hidden)
+                rays += full
+                lanes = np.int64(0)
     if lanes:
         _flush(scene, ray, valid, lanes, lane_c, lane_s, far_hidden, near_hidden)
         rays += lanes

@@ -50,7 +50,7 @@ _NO_ERROR = 0
 _PROPERTY_VERSION_MAJOR = 1
 
 _LOCK = threading.Lock()
-_DEVICE: list[int] = []  # the process's one Embree device, made on first use
+_DEVICE: dict[int, int] = {}  # process id -> its one Embree device, made on first use
 
 
 def wanted() -> bool:
@@ -136,15 +136,18 @@ def usable() -> bool:
 
 
 def _device() -> int:
-    """The process's Embree device (made once; lives as long as the process)."""
+    """The process's Embree device (made once; lives as long as the process). A process
+    forked from one that had a device makes its own: the parent's thread pool is not
+    there."""
+    pid = os.getpid()
     with _LOCK:
-        if not _DEVICE:
-            lib = _library()
-            device = lib.rtcNewDevice(None)
+        if pid not in _DEVICE:
+            device = _library().rtcNewDevice(None)
             if not device:
                 raise OSError("Embree could not make a device")
-            _DEVICE.append(int(device))
-        return _DEVICE[0]
+            _DEVICE.clear()
+            _DEVICE[pid] = int(device)
+        return _DEVICE[pid]
 
 
 class PacketScene:

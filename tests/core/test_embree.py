@@ -5,6 +5,8 @@ float32 rays one at a time there.
 
 from __future__ import annotations
 
+import multiprocessing
+
 import numpy as np
 import pytest
 
@@ -150,3 +152,25 @@ def test_the_library_embreex_ships_is_found() -> None:
     path = embree.library_path()
     assert path is not None and "embree4" in path
     assert embree.usable()
+
+
+def _blocked_in_child() -> list[bool]:
+    """The segments of the fallback test, traced in a process forked from the tests."""
+    scene = cornell_box()
+    occluder = Occluder(scene.positions, scene.triangles)
+    starts = np.array([[0.185, 0.01, 0.169], [0.5, 0.01, 0.5]])
+    blocked = occluder.occluded_local(
+        occluder.to_local(starts), np.array([[0.0, 1.0, 0.0]] * 2), np.array([0.5, 0.5])
+    )
+    return [bool(b) and occluder.packets for b in blocked] + [occluder.packets]
+
+
+def test_a_forked_process_traces_with_its_own_device() -> None:
+    """A script that forks after tracing (multiprocessing's default on Linux) gets the
+    same answers in the child, which makes its own Embree device, and does not hang."""
+    scene = cornell_box()
+    Occluder(scene.positions, scene.triangles).occluded_local(
+        np.zeros((8, 3)), np.tile([0.0, 1.0, 0.0], (8, 1)), np.ones(8)
+    )
+    with multiprocessing.get_context("fork").Pool(1) as pool:
+        assert pool.apply_async(_blocked_in_child).get(timeout=120) == [True, False, True]
