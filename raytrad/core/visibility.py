@@ -484,7 +484,8 @@ def _loops() -> Any:
     """The compiled packet loops (an occluder with packets exists only where they can
     be had)."""
     loops = compiled.rays()
-    assert loops is not None and hasattr(loops, "traced_samples")
+    if loops is None or not hasattr(loops, "traced_samples"):  # pragma: no cover
+        raise RuntimeError("Embree's packet loops are missing (raytrad.core._compiled_rays)")
     return loops
 
 
