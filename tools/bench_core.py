@@ -14,6 +14,7 @@ alone on all cores).
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 import time
 from pathlib import Path
@@ -21,6 +22,8 @@ from pathlib import Path
 import numpy as np
 
 from raytrad import api
+from raytrad.core.embree import RAYS_VARIABLE
+from raytrad.core.kernels import visibility_rays
 from raytrad.core.mesh import MeshSettings
 from raytrad.core.solver import SHOOTING_METHODS, SolveSettings, solve
 from raytrad.core.visibility import Occluder
@@ -31,30 +34,48 @@ ROOT = Path(__file__).resolve().parent.parent
 
 
 class _Recorder:
-    """Replaces ``Occluder.occluded_local`` (class-wide) to keep a sample of the rays traced."""
+    """Replaces ``Occluder.occluded_local`` and ``Occluder.occluded_samples`` (class-wide)
+    to keep a sample of the rays traced; the pass's rays, made and traced in Embree's
+    packets without being written out, are made again for the record
+    (:func:`~raytrad.core.kernels.visibility_rays`, the same rays)."""
 
     def __init__(self, budget: int) -> None:
         self.budget = budget
         self.parts: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
         self.kept = 0
         self.inner = Occluder.occluded_local
+        self.samples = Occluder.occluded_samples
+
+    def _keep(self, o: np.ndarray, d: np.ndarray, t: np.ndarray) -> None:
+        if self.kept < self.budget:
+            self.parts.append((o.astype(np.float32), d.astype(np.float32), t.astype(np.float32)))
+            self.kept += len(o)
 
     def __enter__(self) -> _Recorder:
         recorder = self
 
         def recording(occluder: Occluder, o: np.ndarray, d: np.ndarray, t: np.ndarray):  # type: ignore[no-untyped-def]
-            if recorder.kept < recorder.budget:
-                recorder.parts.append(
-                    (o.astype(np.float32), d.astype(np.float32), t.astype(np.float32))
-                )
-                recorder.kept += len(o)
+            recorder._keep(o, d, t)
             return recorder.inner(occluder, o, d, t)
 
+        def recording_samples(occluder, origins, far, doubt, targets, near, near_targets, shorten):  # type: ignore[no-untyped-def]
+            traced = doubt[near]
+            o, d, t, _, _ = visibility_rays(
+                origins, far & doubt[:, None], targets, near[traced], near_targets[traced],
+                occluder.origin, shorten,
+            )  # fmt: skip
+            recorder._keep(o, d, t)
+            return recorder.samples(
+                occluder, origins, far, doubt, targets, near, near_targets, shorten
+            )
+
         Occluder.occluded_local = recording  # type: ignore[method-assign]
+        Occluder.occluded_samples = recording_samples  # type: ignore[method-assign]
         return self
 
     def __exit__(self, *exc: object) -> None:
         Occluder.occluded_local = self.inner  # type: ignore[method-assign]
+        Occluder.occluded_samples = self.samples  # type: ignore[method-assign]
 
     def rays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         o, d, t = (np.concatenate([p[k] for p in self.parts]) for k in range(3))
@@ -62,7 +83,17 @@ class _Recorder:
 
 
 def raw_throughput(occluder: Occluder, rays: tuple[np.ndarray, np.ndarray, np.ndarray]) -> float:
-    """Rays/s of embreex alone on recorded rays, split across all cores (best of 3)."""
+    """Rays/s of embreex alone (its single-ray query, whatever ``occluder`` traces with)
+    on recorded rays, split across all cores (best of 3)."""
+    before = os.environ.get(RAYS_VARIABLE)
+    os.environ[RAYS_VARIABLE] = "embreex"
+    try:
+        occluder = Occluder(occluder.positions, occluder.triangles)
+    finally:
+        if before is None:
+            del os.environ[RAYS_VARIABLE]
+        else:
+            os.environ[RAYS_VARIABLE] = before
     o, d, t = rays
     best = 0.0
     for _ in range(3):
