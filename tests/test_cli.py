@@ -439,10 +439,12 @@ def test_ctrl_c_while_refining_keeps_the_solve_and_its_rounds(
     balance = report["statistics"]["form_factor_balance"]
     assert resumed["statistics"]["form_factor_balance"] == balance and balance["complete"]
     _print_summary(resumed, {})
+    summary = capsys.readouterr().out
     assert "rays       0 in the form-factor pass of this run (the finished pass's balanced" in (
-        capsys.readouterr().out
+        summary
     )
     assert resumed["resumed"]["refinement_rounds"] == 1
+    assert "; 1 of the rounds and their rays from an earlier run)" in summary
     assert not resumed["refinement"]["stopped"]
     assert not (out / "cornell-box.checkpoint.npz").exists()
     assert not (out / "cornell-box.refinement.npz").exists()

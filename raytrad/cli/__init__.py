@@ -278,6 +278,9 @@ def _print_summary(report: dict[str, Any], outputs: dict[str, Path]) -> None:
     if refinement.get("receivers_interpolated"):
         rounds += " and one cut short"
         cut += f"; {refinement['receivers_interpolated']} of them interpolated: a round cut short"
+    earlier = int((report.get("resumed") or {}).get("refinement_rounds", 0))
+    if earlier:  # the counts are the whole refinement's, as the mesh is
+        cut += f"; {earlier} of the rounds and their rays from an earlier run"
     if refinement.get("receivers_added"):
         lines.append(
             f"refined    +{refinement['receivers_added']} receivers in "
