@@ -269,8 +269,8 @@ def render(
             error_log = monitor.finish(result.state)
             saved = result.stop_reason in RESUMABLE or budget.seconds is not None
             if saved and not resuming.unchanged(taken, result.state, prepared.mesh.patch_count):
-                with timed(timings, "checkpoint"):  # hundreds of MB at large sizes
-                    save(result.state, whole=prepared.engine.complete)
+                with timed(timings, "checkpoint"):  # hundreds of MB of columns at large sizes
+                    save(result.state, whole=resuming.columns_kept(prepared.engine, result))
             prepared.engine.release_columns()  # refinement and the outputs need none
             check_output_range(result.radiosity, scene_path)
             solved, solution = prepared, result.radiosity

@@ -21,6 +21,7 @@ from raytrad.core.mesh import MeshSettings
 from raytrad.core.pipeline import error_samples
 from raytrad.core.solver import SHOOTING_METHODS, SolveSettings
 from raytrad.formats.ply import read_radiosity_ply
+from raytrad.outputs import resume as resuming
 from raytrad.scene.builtin import cornell_box
 from raytrad.scenefiles import write_obj
 from raytrad.settings import RenderSettings
@@ -322,9 +323,10 @@ def test_a_time_limited_refinement_resumes_without_pass_or_solve(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
 ) -> None:
     """A time-limited run whose refinement is cut keeps a checkpoint of the converged
-    solve with every column and the pass's balanced scales: ``--resume`` traces no pass
-    and, the solve having converged, reads no column back (the scales are all refinement
-    needs), shoots no shot, refines to the end and gives the uninterrupted bake."""
+    solve with the pass's balanced scales and no column (the scales are all refinement
+    needs; 630 MB of columns at 60 000 receivers were written for nothing): ``--resume``
+    traces no pass, computes no column, shoots no shot, refines to the end and gives the
+    uninterrupted bake."""
     from raytrad.core import adaptive, pipeline
 
     scene = SCENES / "cornell-box.obj"
@@ -348,6 +350,7 @@ def test_a_time_limited_refinement_resumes_without_pass_or_solve(
     monkeypatch.setattr(pipeline.RunBudget, "__call__", spent)
     assert first.result.stop_reason == "converged" and first.refinement.stopped
     assert first.outputs["checkpoint"].is_file()
+    assert resuming.load_pass_columns(first.outputs["checkpoint"]) == {}
     # the round cut short added receivers it did not gather, and the summary says so
     cut = first.report["refinement"]
     assert cut["receivers_interpolated"] == cut["receivers_added"] > 0 and cut["rounds"] == 0

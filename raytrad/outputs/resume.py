@@ -23,7 +23,7 @@ from raytrad.core.adaptive import Refinement, RefineSettings, goes_on_from
 from raytrad.core.convergence import ErrorLog
 from raytrad.core.formfactor import BALANCED_SCALES, FormFactorEngine
 from raytrad.core.mesh import RadiosityMesh
-from raytrad.core.solver import SolverState, SolveSettings
+from raytrad.core.solver import SolveResult, SolverState, SolveSettings
 from raytrad.errors import RaytradError
 from raytrad.formats.checkpoint import Spool, read_checkpoint, write_checkpoint
 from raytrad.scene import Scene, scene_digests
@@ -140,6 +140,18 @@ def save_run(
     scales = SavedScales(done, dict(balance() if balance else {})) if done else None
     columns = engine.pass_column_parts(whole_pass)
     save_state(path, state, key, columns, whole_pass, logs[0] if logs else None, scales)
+
+
+def columns_kept(engine: FormFactorEngine, result: SolveResult) -> bool:
+    """Whether the checkpoint a run saves after its solve keeps every column of ``engine``
+    (:func:`save_run`'s ``whole_pass``): a solve cut short does, since its resume shoots
+    on. A converged one's resume refines and writes from the balanced scales alone, so
+    its columns are released here and the checkpoint keeps the scales: at 60 000
+    receivers a time-limited run had written 630 MB of columns its resume never read."""
+    if result.stop_reason == "converged":
+        engine.release_columns()
+        return False
+    return engine.complete
 
 
 def resume_point(
