@@ -23,7 +23,6 @@ import numpy as np
 
 from raytrad import api
 from raytrad.core.embree import RAYS_VARIABLE
-from raytrad.core.kernels import visibility_rays
 from raytrad.core.mesh import MeshSettings
 from raytrad.core.solver import SHOOTING_METHODS, SolveSettings, solve
 from raytrad.core.visibility import Occluder
@@ -37,7 +36,7 @@ class _Recorder:
     """Replaces ``Occluder.occluded_local`` and ``Occluder.occluded_samples`` (class-wide)
     to keep a sample of the rays traced; the pass's rays, made and traced in Embree's
     packets without being written out, are made again for the record
-    (:func:`~raytrad.core.kernels.visibility_rays`, the same rays)."""
+    (:meth:`~raytrad.core.visibility.Occluder.sample_rays`, the same rays)."""
 
     def __init__(self, budget: int) -> None:
         self.budget = budget
@@ -59,12 +58,8 @@ class _Recorder:
             return recorder.inner(occluder, o, d, t)
 
         def recording_samples(occluder, origins, far, doubt, targets, near, near_targets, shorten):  # type: ignore[no-untyped-def]
-            traced = doubt[near]
-            o, d, t, _, _ = visibility_rays(
-                origins, far & doubt[:, None], targets, near[traced], near_targets[traced],
-                occluder.origin, shorten,
-            )  # fmt: skip
-            recorder._keep(o, d, t)
+            rays = occluder.sample_rays(origins, far, doubt, targets, near, near_targets, shorten)
+            recorder._keep(*rays[:3])
             return recorder.samples(
                 occluder, origins, far, doubt, targets, near, near_targets, shorten
             )

@@ -69,7 +69,6 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from raytrad.constants import scene_diagonal  # noqa: E402
 from raytrad.core import embree, pairs, pipeline, solver  # noqa: E402
 from raytrad.core.hidden import fill_hidden  # noqa: E402
-from raytrad.core.kernels import visibility_rays  # noqa: E402
 from raytrad.core.mesh import MeshSettings  # noqa: E402
 from raytrad.core.pipeline import prepare  # noqa: E402
 from raytrad.core.visibility import Occluder  # noqa: E402
@@ -156,12 +155,8 @@ def timed_pass(
 
     def recording_samples(self, origins, far, doubt, targets, near, near_targets, shorten):  # type: ignore[no-untyped-def]
         if record:  # the pass's rays made in packets, written out too (as the numpy path)
-            traced = doubt[near]
-            o, d, t, _, _ = visibility_rays(
-                origins, far & doubt[:, None], targets, near[traced], near_targets[traced],
-                self.origin, shorten,
-            )  # fmt: skip
-            recorded.add(o, d, t)
+            rays = self.sample_rays(origins, far, doubt, targets, near, near_targets, shorten)
+            recorded.add(*rays[:3])
         return samples(self, origins, far, doubt, targets, near, near_targets, shorten)
 
     Occluder.occluded_local = recording  # type: ignore[method-assign]

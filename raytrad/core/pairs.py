@@ -39,7 +39,6 @@ from raytrad.core.kernels import (
     polygon_form_factor,
     sample_weights,
     sub_grid,
-    visibility_rays,
     visible_centroid,
 )
 from raytrad.core.mesh import RadiosityMesh
@@ -314,20 +313,14 @@ class PairFactors:
         shorten: float,
     ) -> tuple[np.ndarray, np.ndarray, int]:
         """(far_hidden, near_hidden, rays) as :meth:`Occluder.occluded_samples` gives them,
-        from the rays written out (:func:`visibility_rays`) and traced by
+        from the rays written out (:meth:`Occluder.sample_rays`) and traced by
         :meth:`Occluder.occluded_local` (embreex, or the numpy kernels)."""
         assert self.occluder is not None
         far_hidden = np.zeros(far.shape, dtype=bool)  # C order: written through a flat view
         near_hidden = np.zeros(len(near_c), dtype=bool)
         traced = doubt[near_c]
-        o, d, t, far_c, far_s = visibility_rays(
-            origins,
-            far & doubt[:, None],
-            self._sub_target[sub],
-            near_c[traced],
-            np.compress(traced, near_target, axis=0),
-            self.occluder.origin,
-            shorten,
+        o, d, t, far_c, far_s = self.occluder.sample_rays(
+            origins, far, doubt, self._sub_target[sub], near_c, near_target, shorten
         )
         blocked = self.occluder.occluded_local(o, d, t)
         count = len(far_c)

@@ -23,6 +23,7 @@ import numpy as np
 from raytrad.arrays import unique
 from raytrad.constants import scene_diagonal, tol
 from raytrad.core import compiled, embree
+from raytrad.core.kernels import visibility_rays
 
 log = logging.getLogger(__name__)
 
@@ -249,6 +250,31 @@ class Occluder:
         with self._lock:
             self.rays_cast += rays
         return far_hidden, near_hidden, int(rays)
+
+    def sample_rays(
+        self,
+        origins: np.ndarray,
+        far: np.ndarray,
+        doubt: np.ndarray,
+        targets: np.ndarray,
+        near_receivers: np.ndarray,
+        near_targets: np.ndarray,
+        shorten: float,
+    ) -> tuple[np.ndarray, ...]:
+        """The rays :meth:`occluded_samples` traces (arguments as there), written out in
+        this occluder's local frame by :func:`~raytrad.core.kernels.visibility_rays`: the
+        far pairs of the receivers in doubt, then the near items whose receiver is;
+        returns its (origin, direction, reach, far_c, far_s)."""
+        traced = doubt[near_receivers]
+        return visibility_rays(
+            origins,
+            far & doubt[:, None],
+            targets,
+            near_receivers[traced],
+            np.compress(traced, near_targets, axis=0),
+            self.origin,
+            shorten,
+        )
 
     def _threads(self) -> ThreadPoolExecutor:
         """The pool the batches run on (made on first use; never called from its own
