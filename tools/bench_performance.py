@@ -67,7 +67,7 @@ sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from raytrad.constants import scene_diagonal  # noqa: E402
-from raytrad.core import embree, pairs, pipeline, solver  # noqa: E402
+from raytrad.core import embree, pairs, pipeline, shot, solver  # noqa: E402
 from raytrad.core.hidden import fill_hidden  # noqa: E402
 from raytrad.core.mesh import MeshSettings  # noqa: E402
 from raytrad.core.pipeline import prepare  # noqa: E402
@@ -275,7 +275,7 @@ def pass_table(receivers: int, with_numpy: bool = True) -> None:
         naive = prepared.engine.rays_naive
         factors = [_dense(prepared.engine, p) for p in range(0, prepared.mesh.patch_count, 7)]
         solve_fast, shots = _solve_seconds(prepared, solver._shoot)
-        solve_numpy = _solve_seconds(prepared, solver.numpy_shoot)[0] if with_numpy else None
+        solve_numpy = _solve_seconds(prepared, shot.numpy_shoot)[0] if with_numpy else None
     finally:
         prepared.close()
     single, packets, rays = _replayed(receivers, cull=True)

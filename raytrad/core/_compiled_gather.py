@@ -26,6 +26,7 @@ KERNELS = (
     "_gathered",
     "gather_sums",
     "block_irradiance",
+    "add_row",
 )
 
 
@@ -165,3 +166,16 @@ def block_irradiance(out, mean, near, factors, local, pointer, sources, weights,
         out[j, 0] += f * (s0 - b0)
         out[j, 1] += f * (s1 - b1)
         out[j, 2] += f * (s2 - b2)
+
+
+def add_row(raw_sum, row_sum, near, factors, scale, scaled):
+    """One patch's row added to a final gather's sums in place (see
+    :meth:`raytrad.core.gather.GatherRows.add`): ``factors`` to ``raw_sum`` at the points
+    ``near`` (each once), ``factors * scale`` into ``scaled`` and to ``row_sum``."""
+    for i in range(len(near)):
+        j = near[i]
+        f = factors[i]
+        raw_sum[j] += f
+        s = f * scale
+        scaled[i] = s
+        row_sum[j] += s

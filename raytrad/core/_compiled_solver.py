@@ -12,12 +12,52 @@ import numpy as np
 
 #: Every function to compile, each after the helpers it calls.
 KERNELS = (
+    "_spread_row",
     "patch_spread_rows",
+    "spread_touched",
+    "unshot_totals",
+    "ambient_choice",
     "patch_average",
     "shoot",
     "column_sweep",
     "column_final",
 )
+
+
+def _spread_row(
+    p,
+    u0,
+    u1,
+    u2,
+    patch_entries,
+    patch_ptr,
+    entry_receiver,
+    entry_weight,
+    radiosity,
+    entry_shot,
+    spread,
+    peak,
+):
+    """Patch ``p``'s ``sum_k W_pk |dB_pk - dB_p|`` and ``max_k |dB_pk|`` into row ``p`` of
+    ``spread`` and ``peak``, its unshot radiosity ``dB_p`` being (u0, u1, u2): its entries
+    (``patch_entries[patch_ptr[p]:patch_ptr[p + 1]]``, ascending) summed from zero in that
+    order."""
+    s0 = s1 = s2 = m0 = m1 = m2 = 0.0
+    for q in range(patch_ptr[p], patch_ptr[p + 1]):
+        e = patch_entries[q]
+        k = entry_receiver[e]
+        w = entry_weight[e]
+        own0 = radiosity[k, 0] - entry_shot[e, 0]
+        own1 = radiosity[k, 1] - entry_shot[e, 1]
+        own2 = radiosity[k, 2] - entry_shot[e, 2]
+        s0 += w * abs(own0 - u0)
+        s1 += w * abs(own1 - u1)
+        s2 += w * abs(own2 - u2)
+        m0 = max(m0, abs(own0))
+        m1 = max(m1, abs(own1))
+        m2 = max(m2, abs(own2))
+    spread[p, 0], spread[p, 1], spread[p, 2] = s0, s1, s2
+    peak[p, 0], peak[p, 1], peak[p, 2] = m0, m1, m2
 
 
 def patch_spread_rows(
@@ -34,28 +74,115 @@ def patch_spread_rows(
 ):
     """Per patch of ``rows`` ``sum_k W_pk |dB_pk - dB_p|`` and ``max_k |dB_pk|`` (see
     :meth:`raytrad.core.system.DiscreteSystem.numpy_spread`), into ``spread`` and ``peak``
-    (P, 3) in place: each patch's entries (``patch_entries[patch_ptr[p]:patch_ptr[p + 1]]``,
-    ascending) summed from zero in that order, so a patch's sums do not depend on which
-    other patches are summed with it."""
+    (P, 3) in place, each patch by :func:`_spread_row`, so a patch's sums do not depend on
+    which other patches are summed with it."""
     for i in range(len(rows)):
         p = rows[i]
-        u0, u1, u2 = unshot[p, 0], unshot[p, 1], unshot[p, 2]
-        s0 = s1 = s2 = m0 = m1 = m2 = 0.0
-        for q in range(patch_ptr[p], patch_ptr[p + 1]):
-            e = patch_entries[q]
-            k = entry_receiver[e]
-            w = entry_weight[e]
-            own0 = radiosity[k, 0] - entry_shot[e, 0]
-            own1 = radiosity[k, 1] - entry_shot[e, 1]
-            own2 = radiosity[k, 2] - entry_shot[e, 2]
-            s0 += w * abs(own0 - u0)
-            s1 += w * abs(own1 - u1)
-            s2 += w * abs(own2 - u2)
-            m0 = max(m0, abs(own0))
-            m1 = max(m1, abs(own1))
-            m2 = max(m2, abs(own2))
-        spread[p, 0], spread[p, 1], spread[p, 2] = s0, s1, s2
-        peak[p, 0], peak[p, 1], peak[p, 2] = m0, m1, m2
+        _spread_row(
+            p,
+            unshot[p, 0],
+            unshot[p, 1],
+            unshot[p, 2],
+            patch_entries,
+            patch_ptr,
+            entry_receiver,
+            entry_weight,
+            radiosity,
+            entry_shot,
+            spread,
+            peak,
+        )
+
+
+def spread_touched(
+    touched,
+    patch_entries,
+    patch_ptr,
+    entry_receiver,
+    entry_weight,
+    radiosity,
+    entry_shot,
+    patch_radiosity,
+    shot,
+    spread,
+    peak,
+):
+    """:func:`patch_spread_rows` over the patches marked in ``touched`` ((P,) bool),
+    whose marks it clears, their unshot radiosity taken as ``patch_radiosity - shot``
+    (see :meth:`raytrad.core.system.DiscreteSystem.respread`)."""
+    for p in range(len(touched)):
+        if touched[p]:
+            touched[p] = False
+            _spread_row(
+                p,
+                patch_radiosity[p, 0] - shot[p, 0],
+                patch_radiosity[p, 1] - shot[p, 1],
+                patch_radiosity[p, 2] - shot[p, 2],
+                patch_entries,
+                patch_ptr,
+                entry_receiver,
+                entry_weight,
+                radiosity,
+                entry_shot,
+                spread,
+                peak,
+            )
+
+
+def unshot_totals(patch_radiosity, shot, spread, area):
+    """``sum_p A_p |dB_p|`` and ``sum_p A_p (|dB_p| + spread_p)``, each over the three
+    channels [W] (see :func:`raytrad.core.solver.unshot_totals`)."""
+    absolute = magnitude = 0.0
+    for p in range(len(area)):
+        a = area[p]
+        for c in range(3):
+            u = abs(patch_radiosity[p, c] - shot[p, c])
+            absolute += a * u
+            magnitude += a * (u + spread[p, c])
+    return absolute, magnitude
+
+
+def ambient_choice(patch_radiosity, shot, spread, area, reflectance, captured, gain, amount):
+    """Ambient overshooting's shooter (see :func:`raytrad.core.solver._ambient_amount`
+    and the selection in :func:`raytrad.core.solver.solve`): the first patch of largest
+    ``A_p sum_c (|amount_pc| + spread_pc)`` and that value; its amount ((3,) [W m-2])
+    into ``amount``. A NaN value is chosen first, as ``np.argmax`` would."""
+    count = len(area)
+    total_area = known_area = known_capture = 0.0
+    for p in range(count):
+        total_area += area[p]
+        if captured[p] == captured[p]:  # not NaN: the patch has shot
+            known_area += area[p]
+            known_capture += captured[p] * area[p]
+    mean_capture = known_capture / known_area if known_area > 0.0 else 1.0
+    power = np.zeros(3)
+    lost = np.zeros(3)
+    for p in range(count):
+        a = area[p]
+        capture = captured[p] if captured[p] == captured[p] else mean_capture
+        for c in range(3):
+            power[c] += a * (patch_radiosity[p, c] - shot[p, c])
+            lost[c] += a * (1.0 - reflectance[p, c] * capture)
+    ambient = np.empty(3)
+    floor = 1e-300 * total_area
+    for c in range(3):
+        ambient[c] = max(power[c] / max(lost[c], floor), 0.0) * gain  # formula 3
+    best = -1
+    top = 0.0
+    for p in range(count):
+        chosen = 0.0
+        for c in range(3):
+            cap = max(power[c], 0.0) / area[p]
+            value = min(patch_radiosity[p, c] - shot[p, c] + reflectance[p, c] * ambient[c], cap)
+            chosen += abs(value) + spread[p, c]
+        magnitude = area[p] * chosen
+        if best < 0 or magnitude > top or (magnitude != magnitude and top == top):
+            best, top = p, magnitude
+    for c in range(3):
+        cap = max(power[c], 0.0) / area[best]
+        u = patch_radiosity[best, c] - shot[best, c]
+        amount[c] = min(u + reflectance[best, c] * ambient[c], cap)  # formulas 4 and 5
+    return best, top
 
 
 def patch_average(receivers, values, receiver_ptr, entry_patch, entry_weight, patch_count):
@@ -104,7 +231,7 @@ def shoot(
     touched,
 ):
     """One shot through a cached column, in place (see
-    :func:`raytrad.core.solver.numpy_shoot`, the reference, for the steps). Returns the
+    :func:`raytrad.core.shot.numpy_shoot`, the reference, for the steps). Returns the
     power caught by the receivers, the power they reflect ((3,) each, [W]) and
     ``sum_j a_j F_jp`` [m2]. The patch's sub-areas and clusters (nodes ``sub_lo:sub_hi``)
     get the means of its receivers' shots at ``scratch[base + s]`` (their CSR ``mean_*``).

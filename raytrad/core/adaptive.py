@@ -214,6 +214,7 @@ def refine_adaptively(
     changes = list(out.changes)
     # see FOUND_SHARE: nothing found before round 1
     found = np.zeros(mesh.receiver_count) if out.found is None else out.found
+    sides: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None  # see longest_sides
     for _ in range(settings.rounds - out.rounds):
         done = replace(out, found=found, changes=list(changes))  # what a resume goes on from
         if stop is not None and stop():
@@ -231,7 +232,7 @@ def refine_adaptively(
                 log.warning("refinement skipped: %s", stop_cause(stop))
             break
         room = budget - out.mesh.receiver_count
-        longest = longest_side(out.mesh.positions[out.mesh.triangles])
+        longest = longest_sides(out.mesh, sides)
         order = _to_split(out.mesh, out.radiosity, settings, smallest, room, found, longest)
         refined, parent = out.mesh, np.zeros(0, dtype=np.int64)
         while len(order):  # the closure splits neighbours too: never beyond the budget
@@ -251,6 +252,7 @@ def refine_adaptively(
         # the near field is gathered from the refined mesh: a receiver close to a sharp
         # edge (a shadow at a block's corner) sees it as sharp as the mesh has it now
         current = np.concatenate([out.radiosity, before])
+        coarse = (out.mesh.triangles, longest, parent)
         out.mesh = refined  # the coarser mesh goes before the refined tables are built
         near = engine.refined(refined)
         try:
@@ -271,6 +273,7 @@ def refine_adaptively(
         found = np.concatenate([found, _found(level, before, gathered, settings)])
         found[new[refined.receiver_area[new] == 0]] = 0.0  # hidden: nothing to interpolate
         out.radiosity = np.concatenate([out.radiosity, gathered])
+        sides = coarse
         out.mesh = refined
         out.added += len(new)
         out.rounds += 1
@@ -292,6 +295,24 @@ def refine_adaptively(
             ", ".join(f"{n} {c}" for n, c in out.by_object.items()),
         )
     return out
+
+
+def longest_sides(
+    mesh: RadiosityMesh, before: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+) -> np.ndarray:
+    """(T,) each triangle's longest side [m] (:func:`~raytrad.arrays.longest_side`).
+    ``before``: the triangles of the mesh ``mesh`` was subdivided from (:func:`subdivide`;
+    its positions are ``mesh``'s first ones), their longest sides and each triangle's
+    parent among them; a triangle that kept its parent's corners keeps its side, to the
+    bit, and only the others are measured."""
+    if before is None or len(before[2]) != len(mesh.triangles):
+        return longest_side(mesh.positions[mesh.triangles])
+    old_triangles, old_longest, parent = before
+    kept = (mesh.triangles == old_triangles[parent]).all(axis=1)
+    longest = old_longest[parent]
+    changed = np.flatnonzero(~kept)
+    longest[changed] = longest_side(mesh.positions[mesh.triangles[changed]])
+    return longest
 
 
 def stop_cause(stop: Callable[[], bool] | None) -> str:

@@ -165,11 +165,24 @@ class GatherRows:
         gather: GatherWeights,
         scale: float = 1.0,
     ) -> None:
-        """Patch ``patch``'s row: the points ``near`` (indices) that see it, their
-        ``factors`` before the patch's column ``scale`` and their gather weights."""
-        self.raw_sum[near] += factors
-        factors = factors * scale
-        self.row_sum[near] += factors
+        """Patch ``patch``'s row: the points ``near`` (indices, each once) that see it,
+        their ``factors`` before the patch's column ``scale`` and their gather weights."""
+        fast = compiled.get()
+        if fast is None or factors.dtype != np.float64:
+            self.raw_sum[near] += factors
+            factors = factors * scale
+            self.row_sum[near] += factors
+        else:  # the same sums in one loop (the fancy indexing held the GIL for 0.6 s)
+            scaled = np.empty(len(factors))
+            fast.add_row(
+                self.raw_sum,
+                self.row_sum,
+                np.ascontiguousarray(near, dtype=np.int64),
+                np.ascontiguousarray(factors),
+                float(scale),
+                scaled,
+            )
+            factors = scaled
         self.patches.append((patch, near, factors, gather))
 
     @functools.cached_property

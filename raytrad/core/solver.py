@@ -48,6 +48,8 @@ from raytrad.core import compiled, patch_factors
 from raytrad.core.formfactor import FormFactorEngine
 from raytrad.core.mesh import RadiosityMesh
 from raytrad.core.patch_factors import PatchFactors
+from raytrad.core.shot import respread
+from raytrad.core.shot import shoot as _shoot
 from raytrad.core.solver_state import SolverState
 from raytrad.core.system import DiscreteSystem
 from raytrad.errors import SettingsError, SolverError
@@ -351,34 +353,41 @@ def solve(
     state.spread, state.peak = problem.spread(state.radiosity, state.entry_shot, state.unshot)
     emitters = np.flatnonzero((problem.average(everyone, problem.receiver_emission) > 0).any(1))
     direct = False
+    fast = compiled.get()
+    choose = _compiled_choice(settings.method, fast)
+    totals = unshot_totals(problem, state, fast)
     while not reason:
-        residual = float((area @ state.unshot_magnitude).sum()) / emitted_total
+        residual = totals[1] / emitted_total
         direct = direct or bool((state.shot[emitters] != 0).any(axis=1).all())
         reason = _stop_reason(state, settings, residual, time.perf_counter() - start, direct)
         if not reason and stop is not None and stop():
             reason = "interrupted"
         if reason:
             break
-        amount = method.amount(problem, state, settings, factors)
-        chosen_by = np.abs(amount)
-        if method.selected_by_raised:  # but never by more than the patch would shoot
-            chosen_by = np.minimum(np.abs(_raised(problem, state)), chosen_by)
-        chosen_by += state.spread
-        # the channels' sum, as .sum(axis=1) adds them but without its overhead (a shot)
-        magnitude = area * (chosen_by[:, 0] + chosen_by[:, 1] + chosen_by[:, 2])
-        patch = int(np.argmax(magnitude))
-        if magnitude[patch] <= 0:
+        if choose is not None:
+            amount = np.empty(3)
+            patch, top = choose(
+                state.patch_radiosity,
+                state.shot,
+                state.spread,
+                area,
+                problem.patch_reflectance,
+                state.captured,
+                state.ambient_gain,
+                amount,
+            )
+        else:
+            patch, top, amount = _numpy_choice(problem, state, settings, method, factors)
+        if top <= 0:
             reason = "converged"
             break
-        _shoot(problem, state, engine, patch, amount[patch])
-        state.spread, state.peak = problem.respread(
-            state.spread, state.peak, state.radiosity, state.entry_shot, state.unshot
-        )
+        _shoot(problem, state, engine, patch, amount)
+        respread(problem, state, fast)
         state.rays = rays_before + engine.rays_cast
         state.seconds = time.perf_counter() - start
-        unshot_power = float((area @ np.abs(state.unshot)).sum())
-        _guard_growth(state, unshot_power, settings)
-        _check_divergence(state, unshot_power, emitted_total)
+        totals = unshot_totals(problem, state, fast)
+        _guard_growth(state, totals[0], settings)
+        _check_divergence(state, totals[0], emitted_total)
         if progress is not None:
             progress(state, residual)
     state.seconds = time.perf_counter() - start
@@ -421,160 +430,47 @@ def _stop_reason(
     return ""
 
 
-def _shoot(
+def _compiled_choice(method: str, fast: Any) -> Any:
+    """The compiled shooter choice for ``method`` (ambient overshooting's,
+    :func:`raytrad.core.compiled` ``ambient_choice``), or None: the numpy one
+    (:func:`_numpy_choice`, its reference) then."""
+    return fast.ambient_choice if fast is not None and method == "ambient" else None
+
+
+def _numpy_choice(
     problem: DiscreteSystem,
     state: SolverState,
-    engine: FormFactorEngine,
-    patch: int,
-    amount: np.ndarray,
-) -> None:
-    """Shoot ``amount`` ((3,) [W m-2]) from ``patch`` through its form-factor column: one
-    compiled loop when available (:mod:`raytrad.core.compiled`), which balances the raw
-    column as it goes, else :func:`numpy_shoot`, the reference it is tested against."""
-    if state.radiosity.shape != state.irradiance.shape:  # a state :func:`solve` did not set
-        state.radiosity = problem.receiver_radiosity(state.irradiance)
-    fast = compiled.get()
-    if fast is None:
-        numpy_shoot(problem, state, engine, patch, amount)
-        return
-    column = engine.raw_column(patch)
-    row_scale, column_scale = engine.column_scales(patch)
-    gather = column.gather
-    means = problem.subarea_means
-    power, reflected, capture = fast.shoot(
-        problem.patch_entries[problem.patch_ptr[patch] : problem.patch_ptr[patch + 1]],
-        problem.entry_receiver,
-        problem.entry_weight,
-        problem.receiver_emission,
-        problem.receiver_reflectance,
-        state.irradiance,
-        state.radiosity,
-        state.entry_shot,
-        np.ascontiguousarray(amount, dtype=np.float64),
-        column.receivers,
-        column.factors,
-        _UNSCALED if row_scale is None else row_scale,
-        column_scale,
-        gather.receivers,
-        gather.pointer,
-        gather.sources,
-        gather.weights,
-        problem.receiver_area,
-        problem.receiver_ptr,
-        problem.entry_patch,
-        state.patch_radiosity,
-        problem.scratch,
-        problem.patch_nodes[patch],
-        problem.patch_nodes[patch + 1],
-        means.pointer,
-        means.receivers,
-        means.shares,
-        means.base,
-        problem.touched,
-    )
-    problem.touched[patch] = True  # its receivers' shots and its own shot changed
-    area_p = problem.patch_area[patch]
-    state.shot[patch] += amount
-    state.absorbed += power - reflected
-    state.escaped += area_p * amount - power
-    state.captured[patch] = capture / area_p
-    state.shots += 1
+    settings: SolveSettings,
+    method: ShootingMethod,
+    factors: PatchFactors | None,
+) -> tuple[int, float, np.ndarray]:
+    """The shooter: (patch, its ``A_p sum_c (|amount_pc| + spread_pc)``, its amount (3,)),
+    the first patch of the largest such value, chosen by ``method``'s amounts."""
+    amount = method.amount(problem, state, settings, factors)
+    chosen_by = np.abs(amount)
+    if method.selected_by_raised:  # but never by more than the patch would shoot
+        chosen_by = np.minimum(np.abs(_raised(problem, state)), chosen_by)
+    chosen_by += state.spread
+    # the channels' sum, as .sum(axis=1) adds them but without its overhead (a shot)
+    magnitude = problem.patch_area * (chosen_by[:, 0] + chosen_by[:, 1] + chosen_by[:, 2])
+    patch = int(np.argmax(magnitude))
+    return patch, float(magnitude[patch]), amount[patch]
 
 
-#: The compiled shot's row scales before balancing (none).
-_UNSCALED = np.zeros(0)
-
-
-def numpy_shoot(
-    problem: DiscreteSystem,
-    state: SolverState,
-    engine: FormFactorEngine,
-    patch: int,
-    amount: np.ndarray,
-) -> None:
-    """Shoot ``amount`` ((3,) [W m-2]) from ``patch`` through its form-factor column
-    (``engine.column(patch)``).
-
-    Each of the patch's receivers shoots its own unshot radiosity plus the patch's
-    overshoot (``amount`` minus the patch's unshot radiosity), so that the patch mean is
-    ``amount``. A far receiver gets ``F_jp * amount``; a near one
-    (:mod:`raytrad.core.gather`) gets ``F_jp`` times what it sees of the patch, the
-    gather-weighted mean of the receivers' shots, and the far ones give back what that
-    gained or lost against the mean (:func:`_conserve`).
-    """
-    column = engine.column(patch)
-    entries = problem.patch_entries[problem.patch_ptr[patch] : problem.patch_ptr[patch + 1]]
-    sources = problem.entry_receiver[entries]
-    own = state.radiosity[sources] - state.entry_shot[entries]
-    weight = problem.entry_weight[entries]
-    overshoot = amount - weight @ own
-    shots = own + overshoot[None, :]  # (n, 3), their W-mean is ``amount``
-    state.entry_shot[entries] += shots
-    j, f = column.receivers, column.factors
-    irradiance = f[:, None] * amount[None, :]  # (K, 3)
-    gather = column.gather
-    if len(gather.receivers):
-        problem.scratch[sources] = shots
-        means = problem.subarea_means
-        nodes = np.arange(problem.patch_nodes[patch], problem.patch_nodes[patch + 1])
-        problem.scratch[means.base + nodes] = means.of(nodes, problem.scratch)
-        near = np.searchsorted(j, gather.receivers)
-        irradiance[near] = f[near, None] * gather.gathered(problem.scratch)
-        problem.scratch[sources] = 0.0
-        problem.scratch[means.base + nodes] = 0.0
-        _conserve(irradiance, f, amount, problem.receiver_area[j], near)
-    state.irradiance[j] += irradiance
-    state.radiosity[j] = problem.receiver_radiosity(state.irradiance[j], j)
-    reflected = problem.receiver_reflectance[j] * irradiance
-    state.patch_radiosity += problem.average(j, reflected)
-    area_p = problem.patch_area[patch]
-    state.shot[patch] += amount
-    a = problem.receiver_area[j]
-    caught = a @ irradiance  # (3,) power landing on receivers [W]
-    state.absorbed += caught - a @ reflected
-    state.escaped += area_p * amount - caught
-    state.captured[patch] = float(a @ f) / area_p
-    state.shots += 1
-    problem.touched[:] = True  # the next spread is summed whole
-
-
-def _conserve(
-    irradiance: np.ndarray,
-    factors: np.ndarray,
-    amount: np.ndarray,
-    area: np.ndarray,
-    near: np.ndarray,
-) -> None:
-    """Give the far receivers of a shot the power its near receivers' gather added or took.
-
-    The discrete gather weights are not exactly reciprocal, so the near receivers of a
-    patch catch a little more or less power than the patch mean would deliver; unchecked,
-    closed scenes of high reflectance amplify that by ``1 / (1 - rho)``. The far
-    receivers, which see the patch as its mean, absorb the difference in proportion to
-    their factors (the near ones, when a patch has no far receivers), so every shot
-    delivers exactly ``sum_j a_j F_jp * amount`` in power.
-
-    Parameters
-    ----------
-    irradiance : (K, 3) float
-        The shot's irradiance at the column's receivers, updated in place [W m-2].
-    factors : (K,) float
-        The column's form factors [1].
-    amount : (3,) float
-        Radiosity shot [W m-2].
-    area : (K,) float
-        Receiver areas [m2].
-    near : (G,) int
-        Rows of the near receivers.
-    """
-    excess = area[near] @ (irradiance[near] - factors[near, None] * amount[None, :])  # [W]
-    target = np.ones(len(factors), bool)
-    target[near] = False
-    caught = float(area[target] @ factors[target])
-    if not caught > 0.0:
-        target, caught = ~target, float(area[near] @ factors[near])
-    if caught > 0.0:
-        irradiance[target] -= factors[target, None] * (excess / caught)[None, :]
+def unshot_totals(
+    problem: DiscreteSystem, state: SolverState, fast: Any = None
+) -> tuple[float, float]:
+    """``sum_p A_p |dB_p|`` and ``sum_p A_p (|dB_p| + spread_p)``, each summed over the
+    channels [W]: the unshot power the divergence guards watch, and the residual's
+    numerator. ``fast``: the compiled kernels (:func:`raytrad.core.compiled.get`), or
+    None for numpy (the reference)."""
+    if fast is not None:
+        absolute, magnitude = fast.unshot_totals(
+            state.patch_radiosity, state.shot, state.spread, problem.patch_area
+        )
+        return float(absolute), float(magnitude)
+    area = problem.patch_area
+    return float((area @ np.abs(state.unshot)).sum()), float((area @ state.unshot_magnitude).sum())
 
 
 #: Unshot power beyond this multiple of the emitted power means divergence: overshooting

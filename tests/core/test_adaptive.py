@@ -9,6 +9,7 @@ from collections.abc import Callable
 import numpy as np
 import pytest
 
+from raytrad.arrays import longest_side
 from raytrad.constants import tol
 from raytrad.core.adaptive import (
     FOUND_SHARE,
@@ -16,6 +17,7 @@ from raytrad.core.adaptive import (
     RefineSettings,
     _to_split,
     final_gather,
+    longest_sides,
     patch_means,
     refine_adaptively,
     subdivide,
@@ -71,6 +73,24 @@ def test_subdivision_is_conforming_and_keeps_receivers(
         _open_edge_length(mesh.positions, mesh.triangles),
         rtol=1e-9,
     )
+
+
+def test_longest_sides_carried_through_rounds_are_measured_ones(
+    cornell_fine: tuple[Prepared, SolveResult],
+) -> None:
+    """The sides a round carries over from the mesh before (triangles with their parent's
+    corners) are those measured afresh, to the bit, over three subdivisions."""
+    prepared, _ = cornell_fine
+    mesh, rng = prepared.mesh, np.random.default_rng(3)
+    longest = longest_side(mesh.positions[mesh.triangles])
+    for _ in range(3):
+        split = rng.random(len(mesh.triangles)) < 0.1
+        refined, parent = subdivide(mesh, split, longest)
+        carried = longest_sides(refined, (mesh.triangles, longest, parent))
+        kept = (refined.triangles == mesh.triangles[parent]).all(axis=1)
+        assert 0 < kept.sum() < len(kept)
+        np.testing.assert_array_equal(carried, longest_side(refined.positions[refined.triangles]))
+        mesh, longest = refined, carried
 
 
 def test_refined_engine_gathers_as_a_fresh_one(

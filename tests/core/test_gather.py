@@ -15,6 +15,7 @@ from collections.abc import Callable
 import numpy as np
 import pytest
 
+from raytrad.core import compiled
 from raytrad.core.gather import (
     GatherRows,
     GatherWeights,
@@ -279,3 +280,36 @@ def test_subset_keeps_the_rows_asked_for_with_their_entries() -> None:
         got, want = weights.subset(keep), by_rows(keep)
         for name in ("receivers", "factors", "pointer", "sources", "weights"):
             np.testing.assert_array_equal(getattr(got, name), getattr(want, name))
+
+
+@pytest.mark.skipif(compiled.get() is None, reason="numba is not installed")
+def test_rows_sum_compiled_as_in_numpy(monkeypatch: pytest.MonkeyPatch) -> None:
+    """A final gather's row sums, added patch by patch by the compiled loop, are numpy's
+    fancy-indexed sums to the bit, and so are the balanced factors kept."""
+    rng = np.random.default_rng(4)
+    count = 500
+    rows = []
+    for kernels in (compiled.get(), None):
+        monkeypatch.setattr(compiled, "get", lambda k=kernels: k)
+        got = GatherRows(count, np.zeros(count), [])
+        for patch in range(40):
+            near = rng.permutation(count)[: rng.integers(0, count)]
+            factors = rng.random(len(near))
+            gather = GatherWeights(
+                np.zeros(0, np.int32),
+                np.zeros(0),
+                np.zeros(1, np.int64),
+                np.zeros(0, np.int32),
+                np.zeros(0, np.float32),
+            )
+            got.add(patch, near, factors, gather, float(rng.uniform(0.5, 1.5)))
+        rng = np.random.default_rng(4)
+        rows.append(got)
+    fast, slow = rows
+    np.testing.assert_array_equal(fast.raw_sum, slow.raw_sum)
+    np.testing.assert_array_equal(fast.row_sum, slow.row_sum)
+    for (p, near, f, _), (q, near2, f2, _) in zip(fast.patches, slow.patches, strict=True):
+        assert p == q
+        np.testing.assert_array_equal(near, near2)
+        np.testing.assert_array_equal(f, f2)
+    assert fast.raw_sum.any() and not np.array_equal(fast.raw_sum, fast.row_sum)

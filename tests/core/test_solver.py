@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from raytrad import api
-from raytrad.core import compiled, solver
+from raytrad.core import compiled, shot, solver
 from raytrad.core.formfactor import FormFactorEngine
 from raytrad.core.mesh import MeshSettings
 from raytrad.core.pipeline import Prepared, prepare
@@ -265,7 +265,7 @@ def test_compiled_shot_agrees_with_numpy_shot(
     the same shots, radiosity and energy ledger to rounding, near-field gathers included."""
     settings = SolveSettings(method=method, max_shots=300, tolerance=1e-9)
     fast = solve(cornell.mesh, cornell.engine, settings)
-    monkeypatch.setattr(solver, "_shoot", solver.numpy_shoot)
+    monkeypatch.setattr(solver, "_shoot", shot.numpy_shoot)
     slow = solve(cornell.mesh, cornell.engine, settings)
     assert any(len(g.receivers) for _, _, g in cornell.engine.near_field())
     assert fast.state.shots == slow.state.shots == 300
@@ -274,3 +274,79 @@ def test_compiled_shot_agrees_with_numpy_shot(
     for name in ("absorbed", "escaped", "patch_radiosity", "shot", "entry_shot"):
         a, b = getattr(fast.state, name), getattr(slow.state, name)
         np.testing.assert_allclose(a, b, rtol=0, atol=1e-12 * np.abs(b).max())
+
+
+def _random_state(prepared: Prepared, seed: int, shot_share: float) -> SolverState:
+    """A state with signed unshot radiosity, some patches not shot yet (capture NaN)."""
+    rng = np.random.default_rng(seed)
+    patches = prepared.mesh.patch_count
+    state = solver.new_state(prepared.mesh)
+    state.patch_radiosity = rng.uniform(0.0, 2.0, (patches, 3))
+    state.shot = state.patch_radiosity + rng.normal(0.0, 0.3, (patches, 3))
+    state.captured = np.where(
+        rng.random(patches) < shot_share, rng.uniform(0.5, 1, patches), np.nan
+    )
+    state.spread = rng.uniform(0.0, 0.05, (patches, 3))
+    state.ambient_gain = float(rng.choice([1.0, 0.5]))
+    return state
+
+
+@pytest.mark.skipif(compiled.get() is None, reason="numba is not installed")
+@pytest.mark.parametrize(("seed", "shot_share"), [(0, 0.0), (1, 0.5), (2, 1.0), (3, 0.9)])
+def test_compiled_ambient_choice_agrees_with_numpy(
+    cornell: Prepared, seed: int, shot_share: float
+) -> None:
+    """Ambient overshooting's compiled choice against the registry's amounts and
+    ``np.argmax`` (formulas 3-5, capped; spread added; NaN capture filled by the mean):
+    the same shooter, amount and magnitude to rounding, and the same totals."""
+    fast = compiled.get()
+    problem = solver.DiscreteSystem.from_mesh(cornell.mesh)
+    state = _random_state(cornell, seed, shot_share)
+    settings = SolveSettings()
+    method = SHOOTING_METHODS["ambient"]
+    want = solver._numpy_choice(problem, state, settings, method, None)
+    amount = np.empty(3)
+    patch, top = fast.ambient_choice(
+        state.patch_radiosity,
+        state.shot,
+        state.spread,
+        problem.patch_area,
+        problem.patch_reflectance,
+        state.captured,
+        state.ambient_gain,
+        amount,
+    )
+    assert patch == want[0]
+    assert top == pytest.approx(want[1], rel=1e-12)
+    np.testing.assert_allclose(amount, want[2], rtol=1e-12, atol=1e-15)
+    capped = np.minimum(
+        state.unshot + problem.patch_reflectance * solver.ambient_light(problem, state),
+        np.maximum(problem.patch_area @ state.unshot, 0.0) / problem.patch_area[:, None],
+    )
+    np.testing.assert_allclose(amount, capped[patch], rtol=1e-12, atol=1e-15)
+    assert np.allclose(
+        solver.unshot_totals(problem, state, fast), solver.unshot_totals(problem, state), rtol=1e-12
+    )
+
+
+@pytest.mark.skipif(compiled.get() is None, reason="numba is not installed")
+def test_compiled_choice_solves_as_numpy_choice(
+    cornell: Prepared, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A default solve with the compiled choice and totals against the numpy ones: the same
+    shots and the same radiosity to rounding."""
+    fast = _solve(cornell, tolerance=1e-4)
+    monkeypatch.setattr(solver, "_compiled_choice", lambda method, kernels: None)
+    monkeypatch.setattr(
+        solver,
+        "unshot_totals",
+        lambda problem, state, kernels=None: (
+            float((problem.patch_area @ np.abs(state.unshot)).sum()),
+            float((problem.patch_area @ state.unshot_magnitude).sum()),
+        ),
+    )
+    slow = _solve(cornell, tolerance=1e-4)
+    assert fast.state.shots == slow.state.shots > 100
+    scale = np.abs(slow.radiosity).max()
+    np.testing.assert_allclose(fast.radiosity, slow.radiosity, rtol=0, atol=1e-12 * scale)
+    assert fast.residual == pytest.approx(slow.residual, rel=1e-9)

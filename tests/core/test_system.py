@@ -85,3 +85,41 @@ def test_respread_sums_the_touched_patches_again_to_the_bit(
         assert (got[touched] != before[touched]).any(axis=1).all()
         np.testing.assert_array_equal(got[~touched], before[~touched])
     assert not system.touched.any()
+
+
+@pytest.mark.skipif(compiled.get() is None, reason="numba is not installed")
+def test_spread_touched_is_respread_in_place(system: DiscreteSystem) -> None:
+    """The solver's in-place step (:func:`raytrad.core.shot.respread`, compiled) gives
+    :meth:`DiscreteSystem.respread`'s spread and peak to the bit, the unshot radiosity
+    taken from the patch radiosity and what each patch has shot, and clears the marks."""
+    fast = compiled.get()
+    rng = np.random.default_rng(2)
+    count, patches = len(system.receiver_area), len(system.patch_area)
+    radiosity = system.receiver_radiosity(rng.uniform(0, 2, (count, 3)))
+    entry_shot = rng.uniform(0, 1, (len(system.entry_patch), 3))
+    patch_radiosity = rng.uniform(0, 2, (patches, 3))
+    shot = rng.uniform(0, 2, (patches, 3))
+    spread, peak = system.spread(radiosity, entry_shot, patch_radiosity - shot)
+    touched = rng.random(patches) < 0.4
+    radiosity = radiosity + 0.3
+    patch_radiosity = patch_radiosity + 0.1
+    system.touched[:] = touched
+    want = system.respread(spread, peak, radiosity, entry_shot, patch_radiosity - shot)
+    got = spread.copy(), peak.copy()
+    system.touched[:] = touched
+    fast.spread_touched(
+        system.touched,
+        system.patch_entries,
+        system.patch_ptr,
+        system.entry_receiver,
+        system.entry_weight,
+        radiosity,
+        entry_shot,
+        patch_radiosity,
+        shot,
+        *got,
+    )
+    for a, b, before in zip(got, want, (spread, peak), strict=True):
+        np.testing.assert_array_equal(a, b)
+        assert (a[touched] != before[touched]).any(axis=1).all()
+    assert not system.touched.any()
