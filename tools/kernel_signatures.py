@@ -7,7 +7,9 @@ A render (``--receivers 2000`` of the bundled Cornell box, refinement included) 
 fresh process with an empty numba cache and every Python-level call of a kernel recorded
 (``Dispatcher._compile_for_args``, the path of a call from Python, whether numba then
 compiles or loads from its cache; kernels called only from other kernels are compiled
-within those and not listed). Then each listed kernel is compiled alone for its
+within those and not listed). A solver loop and its ``parallel=True`` copy
+(``<name>_parallel``; one or the other runs, by the machine's cores) are listed alike.
+Then each listed kernel is compiled alone for its
 signatures in a fresh process with an empty cache, after one trivial function so numba's
 own start-up is not counted. Run it after changing a kernel's arguments or adding one;
 ``tests/core/test_compiled.py`` fails while the list misses a signature a render calls.
@@ -49,6 +51,10 @@ from raytrad.cli import main
 with tempfile.TemporaryDirectory() as out:
     if main(sys.argv[1:] + ["-o", out]):
         sys.exit("the render failed")
+from raytrad.core import _compiled_solver
+for name in _compiled_solver.PARALLEL:  # one of each pair runs, by the cores: list both
+    both = seen[name] | seen[name + "_parallel"]
+    seen[name], seen[name + "_parallel"] = set(both), set(both)
 found = {k: sorted([repr(t) for t in s] for s in v) for k, v in sorted(seen.items()) if v}
 print(json.dumps(found))
 """

@@ -10,8 +10,19 @@ computes what its numpy reference computes (:mod:`raytrad.core.solver`,
 
 import numpy as np
 
+#: ``numba.prange`` once :mod:`raytrad.core.compiled` compiles these loops (``range`` as
+#: plain Python): its loops run on several threads in a kernel's :data:`PARALLEL` copy and
+#: one after another in the kernel itself, with the same results.
+prange = range
+
+#: Kernels also compiled with ``parallel=True``, as ``<name>_parallel``
+#: (:func:`raytrad.core.compiled.solver_loops` chooses).
+PARALLEL = ("shoot", "spread_touched")
+
 #: Every function to compile, each after the helpers it calls.
 KERNELS = (
+    "_factor",
+    "_first_at_least",
     "_spread_row",
     "patch_spread_rows",
     "spread_touched",
@@ -110,7 +121,7 @@ def spread_touched(
     """:func:`patch_spread_rows` over the patches marked in ``touched`` ((P,) bool),
     whose marks it clears, their unshot radiosity taken as ``patch_radiosity - shot``
     (see :meth:`raytrad.core.system.DiscreteSystem.respread`)."""
-    for p in range(len(touched)):
+    for p in prange(len(touched)):  # rows apart: the same sums on any number of threads
         if touched[p]:
             touched[p] = False
             _spread_row(
@@ -199,6 +210,28 @@ def patch_average(receivers, values, receiver_ptr, entry_patch, entry_weight, pa
     return out
 
 
+def _factor(r, k, raw_factors, row_scale, column_scale):
+    """Row ``r`` of a column (receiver ``k``) balanced: ``raw_factors[r] * (row_scale[k] *
+    column_scale)``, or ``raw_factors[r]`` when ``row_scale`` is empty."""
+    if len(row_scale):
+        return raw_factors[r] * (row_scale[k] * column_scale)
+    return raw_factors[r] * 1.0
+
+
+def _first_at_least(values, count, bound):
+    """The first index of ``values[:count]`` (ascending) whose value is at least
+    ``bound`` (``count`` when none is)."""
+    lo = 0
+    hi = count
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if values[mid] < bound:
+            lo = mid + 1
+        else:
+            hi = mid
+    return lo
+
+
 def shoot(
     entries,
     entry_receiver,
@@ -229,6 +262,7 @@ def shoot(
     mean_shares,
     base,
     touched,
+    held,
 ):
     """One shot through a cached column, in place (see
     :func:`raytrad.core.shot.numpy_shoot`, the reference, for the steps). Returns the
@@ -238,15 +272,13 @@ def shoot(
     ``radiosity`` (``emission + reflectance * irradiance``) is kept with the irradiance.
     The column's factors are ``raw_factors * (row_scale[receivers] * column_scale)``
     (balanced; ``raw_factors`` when ``row_scale`` is empty). The patches of the column's
-    receivers (whose radiosity changes) are marked in ``touched`` ((P,) bool)."""
+    receivers (whose radiosity changes) are marked in ``touched`` ((P,) bool).
+
+    The column's receivers and its near receivers are taken in ``len(held)`` blocks (the
+    same blocks however many threads run them: :data:`PARALLEL`), each summing its
+    power, its near receivers' excess and its patches' new radiosity apart (``held``
+    (B, P, 3) zeros, left zero), and the blocks' sums are added in block order."""
     count = len(receivers)
-    factors = np.empty(count)
-    if len(row_scale):
-        for r in range(count):
-            factors[r] = raw_factors[r] * (row_scale[receivers[r]] * column_scale)
-    else:
-        for r in range(count):
-            factors[r] = raw_factors[r]
     n = len(entries)
     own = np.empty((n, 3))
     mean0 = mean1 = mean2 = 0.0
@@ -271,10 +303,11 @@ def shoot(
     near_count = len(near_receivers)
     near = np.empty(near_count, dtype=np.int64)
     seen = np.empty((near_count, 3))
-    # What every receiver of one kind (far, or near when no far one catches anything)
-    # gives back so that the column delivers ``amount`` in all (see ``_conserve``).
+    blocks = len(held)
+    part = np.zeros((blocks, 8))
     give0 = give1 = give2 = 0.0
     far_gives = True
+    amount0, amount1, amount2 = amount[0], amount[1], amount[2]
     if near_count:
         for s in range(sub_lo, sub_hi):
             m0 = m1 = m2 = 0.0
@@ -290,39 +323,54 @@ def shoot(
             while receivers[r] != near_receivers[g]:
                 r += 1
             near[g] = r
-        excess0 = excess1 = excess2 = 0.0
-        for g in range(near_count):
-            r = near[g]
-            seen0 = seen1 = seen2 = 0.0
-            for s in range(near_pointer[g], near_pointer[g + 1]):
-                w = near_weights[s]
-                source = near_sources[s]
-                seen0 += w * scratch[source, 0]
-                seen1 += w * scratch[source, 1]
-                seen2 += w * scratch[source, 2]
-            a = area[receivers[r]]
-            f = factors[r]
-            seen[g, 0], seen[g, 1], seen[g, 2] = f * seen0, f * seen1, f * seen2
-            excess0 += a * (seen[g, 0] - f * amount[0])
-            excess1 += a * (seen[g, 1] - f * amount[1])
-            excess2 += a * (seen[g, 2] - f * amount[2])
-        caught = 0.0
-        g = 0
-        for r in range(count):
-            if g < near_count and near[g] == r:
-                g += 1
-            else:
-                caught += area[receivers[r]] * factors[r]
+        for b in prange(blocks):
+            e0 = e1 = e2 = 0.0
+            for g in range(near_count * b // blocks, near_count * (b + 1) // blocks):
+                r = near[g]
+                seen0 = seen1 = seen2 = 0.0
+                for s in range(near_pointer[g], near_pointer[g + 1]):
+                    w = near_weights[s]
+                    source = near_sources[s]
+                    seen0 += w * scratch[source, 0]
+                    seen1 += w * scratch[source, 1]
+                    seen2 += w * scratch[source, 2]
+                k = receivers[r]
+                a = area[k]
+                f = _factor(r, k, raw_factors, row_scale, column_scale)
+                seen[g, 0], seen[g, 1], seen[g, 2] = f * seen0, f * seen1, f * seen2
+                e0 += a * (seen[g, 0] - f * amount0)
+                e1 += a * (seen[g, 1] - f * amount1)
+                e2 += a * (seen[g, 2] - f * amount2)
+            r0 = count * b // blocks
+            r1 = count * (b + 1) // blocks
+            g = _first_at_least(near, near_count, r0)
+            far = close = 0.0
+            for r in range(r0, r1):
+                k = receivers[r]
+                f = _factor(r, k, raw_factors, row_scale, column_scale)
+                if g < near_count and near[g] == r:
+                    g += 1
+                    close += area[k] * f
+                else:
+                    far += area[k] * f
+            part[b, 0], part[b, 1], part[b, 2], part[b, 3], part[b, 4] = e0, e1, e2, far, close
+        excess0 = excess1 = excess2 = caught = caught_near = 0.0
+        for b in range(blocks):
+            excess0 += part[b, 0]
+            excess1 += part[b, 1]
+            excess2 += part[b, 2]
+            caught += part[b, 3]
+            caught_near += part[b, 4]
         if not caught > 0.0:
             far_gives = False
-            caught = 0.0
-            for g in range(near_count):
-                caught += area[receivers[near[g]]] * factors[near[g]]
+            caught = caught_near
         if caught > 0.0:
             give0, give1, give2 = excess0 / caught, excess1 / caught, excess2 / caught
             if not far_gives:
                 for g in range(near_count):
-                    f = factors[near[g]]
+                    r = near[g]
+                    k = receivers[r]
+                    f = _factor(r, k, raw_factors, row_scale, column_scale)
                     seen[g, 0] -= f * give0
                     seen[g, 1] -= f * give1
                     seen[g, 2] -= f * give2
@@ -335,68 +383,72 @@ def shoot(
     for i in range(n):
         k = entry_receiver[entries[i]]
         scratch[k, 0] = scratch[k, 1] = scratch[k, 2] = 0.0
-    power0 = power1 = power2 = 0.0
-    reflected0 = reflected1 = reflected2 = 0.0
+    for b in prange(blocks):
+        r0 = count * b // blocks
+        r1 = count * (b + 1) // blocks
+        g = _first_at_least(near, near_count, r0)
+        p0 = p1 = p2 = q0 = q1 = q2 = capture = 0.0
+        last = -1
+        h0 = h1 = h2 = 0.0
+        for r in range(r0, r1):
+            k = receivers[r]
+            a = area[k]
+            f = _factor(r, k, raw_factors, row_scale, column_scale)
+            capture += a * f
+            if g < near_count and near[g] == r:
+                v0, v1, v2 = seen[g, 0], seen[g, 1], seen[g, 2]
+                g += 1
+            elif far_gives:
+                v0 = f * amount0 - f * give0
+                v1 = f * amount1 - f * give1
+                v2 = f * amount2 - f * give2
+            else:
+                v0, v1, v2 = f * amount0, f * amount1, f * amount2
+            irradiance[k, 0] += v0
+            irradiance[k, 1] += v1
+            irradiance[k, 2] += v2
+            radiosity[k, 0] = emission[k, 0] + reflectance[k, 0] * irradiance[k, 0]
+            radiosity[k, 1] = emission[k, 1] + reflectance[k, 1] * irradiance[k, 1]
+            radiosity[k, 2] = emission[k, 2] + reflectance[k, 2] * irradiance[k, 2]
+            b0 = reflectance[k, 0] * v0
+            b1 = reflectance[k, 1] * v1
+            b2 = reflectance[k, 2] * v2
+            p0 += a * v0
+            p1 += a * v1
+            p2 += a * v2
+            q0 += a * b0
+            q1 += a * b1
+            q2 += a * b2
+            for e in range(receiver_ptr[k], receiver_ptr[k + 1]):
+                w = entry_weight[e]
+                p = entry_patch[e]
+                if p != last:
+                    if last >= 0:
+                        held[b, last, 0], held[b, last, 1], held[b, last, 2] = h0, h1, h2
+                    last = p
+                    touched[p] = True
+                    h0, h1, h2 = held[b, p, 0], held[b, p, 1], held[b, p, 2]
+                h0 += w * b0
+                h1 += w * b1
+                h2 += w * b2
+        if last >= 0:
+            held[b, last, 0], held[b, last, 1], held[b, last, 2] = h0, h1, h2
+        part[b, 0], part[b, 1], part[b, 2] = p0, p1, p2
+        part[b, 3], part[b, 4], part[b, 5], part[b, 6] = q0, q1, q2, capture
+    power = np.zeros(3)
+    reflected = np.zeros(3)
     capture = 0.0
-    amount0, amount1, amount2 = amount[0], amount[1], amount[2]
-    g = 0
-    # The patch being added to, held in registers while the entries stay on it (the
-    # same sums in the same order as adding to ``patch_radiosity`` entry by entry).
-    held = -1
-    held0 = held1 = held2 = 0.0
-    for r in range(count):
-        k = receivers[r]
-        a = area[k]
-        f = factors[r]
-        capture += a * f
-        if g < near_count and near[g] == r:
-            v0, v1, v2 = seen[g, 0], seen[g, 1], seen[g, 2]
-            g += 1
-        elif far_gives:
-            v0 = f * amount0 - f * give0
-            v1 = f * amount1 - f * give1
-            v2 = f * amount2 - f * give2
-        else:
-            v0, v1, v2 = f * amount0, f * amount1, f * amount2
-        irradiance[k, 0] += v0
-        irradiance[k, 1] += v1
-        irradiance[k, 2] += v2
-        radiosity[k, 0] = emission[k, 0] + reflectance[k, 0] * irradiance[k, 0]
-        radiosity[k, 1] = emission[k, 1] + reflectance[k, 1] * irradiance[k, 1]
-        radiosity[k, 2] = emission[k, 2] + reflectance[k, 2] * irradiance[k, 2]
-        b0 = reflectance[k, 0] * v0
-        b1 = reflectance[k, 1] * v1
-        b2 = reflectance[k, 2] * v2
-        power0 += a * v0
-        power1 += a * v1
-        power2 += a * v2
-        reflected0 += a * b0
-        reflected1 += a * b1
-        reflected2 += a * b2
-        for e in range(receiver_ptr[k], receiver_ptr[k + 1]):  # each (patch, c) in order
-            w = entry_weight[e]
-            p = entry_patch[e]
-            if p != held:
-                if held >= 0:
-                    patch_radiosity[held, 0] = held0
-                    patch_radiosity[held, 1] = held1
-                    patch_radiosity[held, 2] = held2
-                held = p
-                touched[p] = True
-                held0, held1, held2 = (
-                    patch_radiosity[p, 0],
-                    patch_radiosity[p, 1],
-                    patch_radiosity[p, 2],
-                )
-            held0 += w * b0
-            held1 += w * b1
-            held2 += w * b2
-    if held >= 0:
-        patch_radiosity[held, 0] = held0
-        patch_radiosity[held, 1] = held1
-        patch_radiosity[held, 2] = held2
-    power = np.array([power0, power1, power2])
-    reflected = np.array([reflected0, reflected1, reflected2])
+    for b in range(blocks):
+        for c in range(3):
+            power[c] += part[b, c]
+            reflected[c] += part[b, 3 + c]
+        capture += part[b, 6]
+    for p in range(len(touched)):
+        if touched[p]:
+            for b in range(blocks):
+                for c in range(3):
+                    patch_radiosity[p, c] += held[b, p, c]
+                    held[b, p, c] = 0.0
     return power, reflected, capture
 
 

@@ -28,6 +28,7 @@ import subprocess
 import sys
 import threading
 import time
+import types
 from pathlib import Path
 from types import SimpleNamespace
 from typing import Any
@@ -36,6 +37,7 @@ log = logging.getLogger(__name__)
 
 _LOCK = threading.Lock()
 _STATE: dict[str, Any] = {}
+_THREAD = threading.local()
 #: The most processes that compile the kernels at once the first time (:func:`compilers`).
 MAX_COMPILERS = 8
 #: Seconds to wait for a helper compiling kernels before leaving them to numba [s].
@@ -127,14 +129,95 @@ def link_embree(numba: Any) -> None:
 
 def _bind(numba: Any, loops: Any, names: tuple[str, ...]) -> dict[str, Any]:
     """The loops ``names`` of module ``loops`` wrapped by :func:`_jit` where not yet (and
-    rebound in the module, so that later loops call them compiled), by name."""
+    rebound in the module, so that later loops call them compiled), by name; those of its
+    ``PARALLEL`` also as ``<name>_parallel``, compiled with ``parallel=True`` (its
+    ``prange`` is numba's)."""
     borrowing = getattr(loops, "BORROWING", ())
+    if hasattr(loops, "prange"):
+        loops.prange = numba.prange
     bound = {}
     for name in names:
         if not hasattr(getattr(loops, name), "py_func"):  # not compiled yet
             setattr(loops, name, _jit(numba, getattr(loops, name), name in borrowing))
         bound[name] = getattr(loops, name)
+    for name in getattr(loops, "PARALLEL", ()):
+        twin = f"{name}_parallel"
+        if not hasattr(loops, twin):
+            setattr(loops, twin, _jit(numba, _renamed(bound[name].py_func, twin), parallel=True))
+        bound[twin] = getattr(loops, twin)
     return bound
+
+
+def _renamed(function: Any, name: str) -> Any:
+    """A copy of ``function`` named ``name``: numba caches a function by its module,
+    qualified name and line, so a copy compiled with other options gets a cache of its
+    own instead of loading the original's."""
+    code = function.__code__.replace(co_name=name, co_qualname=name)
+    copy = types.FunctionType(
+        code, function.__globals__, name, function.__defaults__, function.__closure__
+    )
+    copy.__qualname__ = name
+    copy.__doc__ = function.__doc__
+    return copy
+
+
+def solver_loops(fast: SimpleNamespace, wanted: int) -> SimpleNamespace:
+    """The solver's loops of the compiled kernels ``fast`` (``shoot``,
+    ``spread_touched``) to call from this thread: their ``parallel=True`` copies when
+    :func:`solver_threads` of ``wanted`` threads is above 1, numba's threads set to that
+    in this thread, else the loops themselves. Both give the same results to the bit
+    (their blocks and rows are summed apart and added in order)."""
+    threads = solver_threads(wanted)
+    parallel = threads > 1 and hasattr(fast, "shoot_parallel")
+    if parallel and getattr(_THREAD, "threads", 0) != threads:
+        import numba
+
+        numba.set_num_threads(threads)  # numba's setting is per calling thread
+        _THREAD.threads = threads
+    key = (id(fast), parallel)
+    loops = _STATE.get("solver_loops")
+    if loops is None or loops[0] != key:
+        suffix = "_parallel" if parallel else ""
+        chosen = SimpleNamespace(
+            shoot=getattr(fast, "shoot" + suffix),
+            spread_touched=getattr(fast, "spread_touched" + suffix),
+        )
+        loops = _STATE["solver_loops"] = (key, chosen)
+    return loops[1]
+
+
+def solver_threads(wanted: int) -> int:
+    """Threads the solver's parallel loops run on in this process: ``wanted`` (the
+    form-factor pass's, :func:`raytrad.core.visibility.worker_count`), at most numba's. 1
+    (the loops one after another) where numba's threading layer is its workqueue (neither
+    OpenMP nor TBB loads: a launch would cost about 120 µs, more than a shot's loops), in
+    a process forked from one that had started the layer (GNU OpenMP's threads do not
+    survive a fork)."""
+    started = _STATE.get("threading")
+    if started is None:
+        with _LOCK:
+            started = _STATE.get("threading")
+            if started is None:
+                started = _STATE["threading"] = (os.getpid(), _start_threading())
+    if started[0] != os.getpid() or not started[1]:
+        return 1
+    import numba
+
+    return max(1, min(wanted, int(getattr(numba.config, "NUMBA_NUM_THREADS", 1))))
+
+
+def _start_threading() -> bool:
+    """Start numba's threading layer; whether it is one whose launches are cheap (OpenMP,
+    TBB)."""
+    try:
+        import numba
+        from numba.np.ufunc import parallel
+
+        parallel._launch_threads()
+        return numba.threading_layer() in ("omp", "tbb")
+    except Exception as error:  # numba internals moved, no layer: the serial loops
+        log.debug("numba's threading layer did not start: %s", error)
+        return False
 
 
 def rays() -> SimpleNamespace | None:
@@ -339,7 +422,7 @@ def compile_listed() -> None:
             _compile(numba, kernels[name], signatures)
 
 
-def _jit(numba: Any, function: Any, borrowing: bool = False) -> Any:
+def _jit(numba: Any, function: Any, borrowing: bool = False, parallel: bool = False) -> Any:
     """``numba.njit(cache=True, nogil=True)``, without the disk cache where numba finds no
     writable place for it (a read-only install and no home directory): compiled anew in
     each process then, never an error.
@@ -349,8 +432,12 @@ def _jit(numba: Any, function: Any, borrowing: bool = False) -> Any:
     counting (``_nrt=False``). numba otherwise counts a reference to every array it is
     handed, tuples' members included, on each call, and the near field calls its
     helpers once a triangle. Where numba refuses the option, the helper counts as before.
+    ``parallel``: compiled with ``parallel=True`` (its ``prange`` loops on numba's
+    threads).
     """
     options: dict[str, Any] = {"nogil": True}
+    if parallel:
+        options["parallel"] = True
     if borrowing and hasattr(numba.core.cpu.CPUTargetOptions, "_nrt"):
         options["_nrt"] = False
     try:

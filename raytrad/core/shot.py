@@ -19,6 +19,7 @@ from raytrad.core import compiled
 from raytrad.core.formfactor import FormFactorEngine
 from raytrad.core.solver_state import SolverState
 from raytrad.core.system import DiscreteSystem
+from raytrad.core.visibility import worker_count
 
 
 def respread(problem: DiscreteSystem, state: SolverState, fast: Any) -> None:
@@ -29,7 +30,7 @@ def respread(problem: DiscreteSystem, state: SolverState, fast: Any) -> None:
             state.spread, state.peak, state.radiosity, state.entry_shot, state.unshot
         )
         return
-    fast.spread_touched(
+    compiled.solver_loops(fast, worker_count()).spread_touched(
         problem.touched,
         problem.patch_entries,
         problem.patch_ptr,
@@ -60,11 +61,12 @@ def shoot(
     if fast is None:
         numpy_shoot(problem, state, engine, patch, amount)
         return
+    loops = compiled.solver_loops(fast, worker_count())
     column = engine.raw_column(patch)
     row_scale, column_scale = engine.column_scales(patch)
     gather = column.gather
     means = problem.subarea_means
-    power, reflected, capture = fast.shoot(
+    power, reflected, capture = loops.shoot(
         problem.patch_entries[problem.patch_ptr[patch] : problem.patch_ptr[patch + 1]],
         problem.entry_receiver,
         problem.entry_weight,
@@ -94,6 +96,7 @@ def shoot(
         means.shares,
         means.base,
         problem.touched,
+        problem.held,
     )
     problem.touched[patch] = True  # its receivers' shots and its own shot changed
     area_p = problem.patch_area[patch]

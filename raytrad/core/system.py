@@ -18,6 +18,11 @@ from raytrad.core import compiled
 from raytrad.core.gather import SubareaMeans, subarea_means
 from raytrad.core.mesh import RadiosityMesh
 
+#: Blocks the compiled shot splits a column into, each summed apart and added in order
+#: (:mod:`raytrad.core._compiled_solver`): fixed, so that a shot's sums are the same on
+#: one thread or several.
+SHOT_BLOCKS = 8
+
 
 @dataclass(frozen=True)
 class DiscreteSystem:
@@ -38,6 +43,7 @@ class DiscreteSystem:
     patch_nodes: np.ndarray  # (P + 1,) each patch's sub-areas and clusters, CSR pointers
     scratch: np.ndarray  # (R + N, 3) zeros, a work array of _shoot
     touched: np.ndarray  # (P,) bool: the patches a shot changed (see respread)
+    held: np.ndarray  # (SHOT_BLOCKS, P, 3) zeros, a work array of the compiled shot
 
     @classmethod
     def from_mesh(cls, mesh: RadiosityMesh, means: SubareaMeans | None = None) -> DiscreteSystem:
@@ -73,6 +79,7 @@ class DiscreteSystem:
             patch_nodes=means.patch_ptr,
             scratch=np.zeros((mesh.receiver_count + len(means.pointer) - 1, 3)),
             touched=np.zeros(mesh.patch_count, dtype=bool),
+            held=np.zeros((SHOT_BLOCKS, mesh.patch_count, 3)),
         )
 
     def spread(

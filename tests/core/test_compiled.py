@@ -181,7 +181,8 @@ def test_a_render_calls_only_listed_signatures(tmp_path) -> None:
     from raytrad.core._kernel_signatures import SIGNATURES
 
     called = _recorded_calls(tmp_path)
-    assert "near_triangles" in called and "shoot" in called  # the pass and the solve ran
+    # the pass and the solve ran (its shot one after another, or on several threads)
+    assert "near_triangles" in called and ("shoot" in called or "shoot_parallel" in called)
     for name, signatures in called.items():
         listed = {tuple(arguments) for arguments in SIGNATURES.get(name, [])}
         missing = {tuple(arguments) for arguments in signatures} - listed
@@ -318,3 +319,28 @@ def test_compilers_reads_the_environment(monkeypatch) -> None:
     assert compiled.compilers() == 1
     monkeypatch.delenv("RAYTRAD_COMPILERS")
     assert 1 <= compiled.compilers() <= compiled.MAX_COMPILERS
+
+
+def _solver_threads_in_child() -> int:
+    return compiled.solver_threads(2)
+
+
+def test_the_solver_loops_run_one_after_another_in_a_forked_child() -> None:
+    """numba's threading layer (GNU OpenMP) does not survive a fork: a child forked after
+    this process started it gets the loops one after another, and does not hang."""
+    import multiprocessing
+
+    compiled.solver_threads(2)  # starts the layer here
+    with multiprocessing.get_context("fork").Pool(1) as pool:
+        assert pool.apply_async(_solver_threads_in_child).get(timeout=120) == 1
+
+
+def test_a_parallel_copy_is_compiled_and_cached_apart() -> None:
+    """Each solver loop's ``parallel=True`` copy is a dispatcher of its own, named apart
+    (numba keys its cache by name: the copy must not load the original's code)."""
+    fast = compiled.get()
+    for name in ("shoot", "spread_touched"):
+        serial, parallel = getattr(fast, name), getattr(fast, f"{name}_parallel")
+        assert parallel.targetoptions.get("parallel") and not serial.targetoptions.get("parallel")
+        assert parallel.py_func.__qualname__ == f"{name}_parallel"
+        assert parallel.py_func.__code__.co_code == serial.py_func.__code__.co_code

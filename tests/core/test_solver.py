@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from collections.abc import Callable
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -350,3 +351,26 @@ def test_compiled_choice_solves_as_numpy_choice(
     scale = np.abs(slow.radiosity).max()
     np.testing.assert_allclose(fast.radiosity, slow.radiosity, rtol=0, atol=1e-12 * scale)
     assert fast.residual == pytest.approx(slow.residual, rel=1e-9)
+
+
+@pytest.mark.skipif(compiled.get() is None, reason="numba is not installed")
+def test_the_parallel_shot_solves_as_the_serial_one_to_the_bit(
+    cornell: Prepared, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The shot and spread compiled with ``parallel=True`` (numba's threads) and without
+    (one after another) sum the same blocks in the same order: the same solve to the bit,
+    whatever the cores."""
+    fast = compiled.get()
+    results = []
+    for suffix in ("", "_parallel"):
+        loops = SimpleNamespace(
+            shoot=getattr(fast, "shoot" + suffix),
+            spread_touched=getattr(fast, "spread_touched" + suffix),
+        )
+        monkeypatch.setattr(compiled, "solver_loops", lambda kernels, wanted, chosen=loops: chosen)
+        results.append(_solve(cornell, tolerance=1e-4))
+    serial, parallel = results
+    assert serial.state.shots == parallel.state.shots > 100
+    np.testing.assert_array_equal(serial.radiosity, parallel.radiosity)
+    for name in ("patch_radiosity", "shot", "entry_shot", "absorbed", "escaped", "spread"):
+        np.testing.assert_array_equal(getattr(serial.state, name), getattr(parallel.state, name))
