@@ -481,7 +481,7 @@ def render_table(sizes: list[int], previous: str | None, runs: int, truth: Truth
             line += f" {100 * med['worst']:.2f} | {100 * med['rms']:.2f} |"
         if old:
             ratio = np.median([a["wall"] / b["wall"] for a, b in zip(now, old, strict=True)])
-            line += f" {_medians(old)['wall']:.1f} | {ratio:.2f} |"
+            line += f" {_medians(old)['wall']:.1f} | {ratio:.3f} |"
             if truth:
                 line += f" {100 * _medians(old)['worst']:.2f} | {100 * _medians(old)['rms']:.2f} |"
         print(line)

@@ -200,7 +200,12 @@ def resume_point(
         log.warning("%s; starting afresh", exc)
         return ResumePoint()
     if columns and not whole:
-        log.info("resuming the form-factor pass from %s: %d columns", path, len(columns["patch"]))
+        log.info(
+            "resuming the form-factor pass from %s: %d columns computed before the stop "
+            "(by the pass, or for the solve's shots after it)",
+            path,
+            len(columns["patch"]),
+        )
         return ResumePoint(columns=columns)
     history = _history(path, record)
     if columns and scales is not None and _converged(history, state, solve):
