@@ -4,10 +4,10 @@
 files are copied to the build folder, its kernels are compiled there, on every core,
 into numba's cache beside them (``raytrad/core/__pycache__``), and the wheel carries the
 cache. numba keys a cached kernel by its source file's content, the numba version and
-this CPU, so the installed copy loads them instead of compiling for 15 s on the first
-render. Anything that goes wrong here leaves the kernels to compile on first use, as
-without this hook; ``RAYTRAD_BUILD_KERNELS=0`` skips it. Editable installs skip it too
-(their kernels are cached in the checkout on first use).
+this CPU, so the installed copy loads them instead of compiling them (11-13 s on 2
+cores) on the first render. Anything that goes wrong here leaves the kernels to compile
+on first use, as without this hook; ``RAYTRAD_BUILD_KERNELS=0`` skips it. Editable
+installs skip it too (their kernels are cached in the checkout on first use).
 """
 
 from __future__ import annotations
@@ -21,7 +21,7 @@ from pathlib import Path
 from setuptools import setup
 from setuptools.command.build_py import build_py
 
-#: The most seconds the compiling may take (about 8 s on 2 cores).
+#: The most seconds the compiling may take (it takes 11-13 s on 2 cores).
 TIMEOUT = 600
 
 
