@@ -14,6 +14,8 @@ points move into their own triangles (:func:`raytrad.core.pairs.receiver_points`
 
 from __future__ import annotations
 
+import os
+
 import numpy as np
 import pytest
 
@@ -344,3 +346,16 @@ def test_a_parallel_copy_is_compiled_and_cached_apart() -> None:
         assert parallel.targetoptions.get("parallel") and not serial.targetoptions.get("parallel")
         assert parallel.py_func.__qualname__ == f"{name}_parallel"
         assert parallel.py_func.__code__.co_code == serial.py_func.__code__.co_code
+
+
+def test_the_solver_loops_run_one_after_another_without_a_cheap_threading_layer(
+    monkeypatch,
+) -> None:
+    """Where numba's threading layer would be its workqueue (a launch costs more than a
+    shot's loops), or one thread is wanted, the serial loops run."""
+    monkeypatch.setitem(compiled._STATE, "threading", (os.getpid(), False))
+    assert compiled.solver_threads(2) == 1
+    monkeypatch.setitem(compiled._STATE, "threading", (os.getpid(), True))
+    assert compiled.solver_threads(1) == 1
+    fast = compiled.get()
+    assert compiled.solver_loops(fast, 1).shoot is fast.shoot
