@@ -192,7 +192,9 @@ def solver_threads(wanted: int) -> int:
     (the loops one after another) where numba's threading layer is its workqueue (neither
     OpenMP nor TBB loads: a launch would cost about 120 µs, more than a shot's loops), in
     a process forked from one that had started the layer (GNU OpenMP's threads do not
-    survive a fork)."""
+    survive a fork). The layer is started on the first call that wants several threads."""
+    if wanted <= 1:
+        return 1
     started = _STATE.get("threading")
     if started is None:
         with _LOCK:
