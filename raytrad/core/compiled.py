@@ -56,12 +56,17 @@ def get() -> SimpleNamespace | None:
     """
     if not wanted():
         return None
-    if "kernels" in _STATE:
-        return _STATE["kernels"]
-    with _LOCK:
-        if "kernels" not in _STATE:
-            _STATE["kernels"] = _build()
-    return _STATE["kernels"]
+    return _once("kernels", _build)
+
+
+def _once(key: str, make: Any) -> Any:
+    """``_STATE[key]``, made by ``make()`` on the first call of any thread (the others
+    wait for it)."""
+    if key not in _STATE:
+        with _LOCK:
+            if key not in _STATE:
+                _STATE[key] = make()
+    return _STATE[key]
 
 
 def _build() -> SimpleNamespace | None:
@@ -195,12 +200,7 @@ def solver_threads(wanted: int) -> int:
     survive a fork). The layer is started on the first call that wants several threads."""
     if wanted <= 1:
         return 1
-    started = _STATE.get("threading")
-    if started is None:
-        with _LOCK:
-            started = _STATE.get("threading")
-            if started is None:
-                started = _STATE["threading"] = (os.getpid(), _start_threading())
+    started = _once("threading", lambda: (os.getpid(), _start_threading()))
     if started[0] != os.getpid() or not started[1]:
         return 1
     import numba
@@ -230,19 +230,18 @@ def rays() -> SimpleNamespace | None:
     solved fails first). None where :func:`wanted` is False. Thread-safe."""
     if not wanted():
         return None
-    if "rays" in _STATE:
-        return _STATE["rays"]
-    with _LOCK:
-        if "rays" not in _STATE:
-            import numba
+    return _once("rays", _build_rays)
 
-            from raytrad.core import _compiled_kernels, _compiled_rays
 
-            link_embree(numba)
-            _bind(numba, _compiled_kernels, ("_segment",))
-            loops = _bind(numba, _compiled_rays, _compiled_rays.KERNELS)
-            _STATE["rays"] = SimpleNamespace(**loops)
-    return _STATE["rays"]
+def _build_rays() -> SimpleNamespace:
+    """:func:`rays`' loops, bound."""
+    import numba
+
+    from raytrad.core import _compiled_kernels, _compiled_rays
+
+    link_embree(numba)
+    _bind(numba, _compiled_kernels, ("_segment",))
+    return SimpleNamespace(**_bind(numba, _compiled_rays, _compiled_rays.KERNELS))
 
 
 def compilers() -> int:
