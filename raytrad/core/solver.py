@@ -365,17 +365,7 @@ def solve(
         if reason:
             break
         if choose is not None:
-            amount = np.empty(3)
-            patch, top = choose(
-                state.patch_radiosity,
-                state.shot,
-                state.spread,
-                area,
-                problem.patch_reflectance,
-                state.captured,
-                state.ambient_gain,
-                amount,
-            )
+            patch, top, amount = choose(problem, state)
         else:
             patch, top, amount = _numpy_choice(problem, state, settings, method, factors)
         if top <= 0:
@@ -430,11 +420,31 @@ def _stop_reason(
     return ""
 
 
-def _compiled_choice(method: str, fast: Any) -> Any:
+def _compiled_choice(
+    method: str, fast: Any
+) -> Callable[[DiscreteSystem, SolverState], tuple[int, float, np.ndarray]] | None:
     """The compiled shooter choice for ``method`` (ambient overshooting's,
-    :func:`raytrad.core.compiled` ``ambient_choice``), or None: the numpy one
-    (:func:`_numpy_choice`, its reference) then."""
-    return fast.ambient_choice if fast is not None and method == "ambient" else None
+    :func:`raytrad.core.compiled` ``ambient_choice``), called as ``choose(problem,
+    state)`` and returning what :func:`_numpy_choice` (its reference) returns; None: the
+    numpy one then."""
+    if fast is None or method != "ambient":
+        return None
+
+    def choose(problem: DiscreteSystem, state: SolverState) -> tuple[int, float, np.ndarray]:
+        amount = np.empty(3)
+        patch, top = fast.ambient_choice(
+            state.patch_radiosity,
+            state.shot,
+            state.spread,
+            problem.patch_area,
+            problem.patch_reflectance,
+            state.captured,
+            state.ambient_gain,
+            amount,
+        )
+        return int(patch), float(top), amount
+
+    return choose
 
 
 def _numpy_choice(
