@@ -19,6 +19,9 @@ prange = range
 #: (:func:`raytrad.core.compiled.solver_loops` chooses).
 PARALLEL = ("shoot", "spread_touched")
 
+#: Runs of about equal entries :func:`spread_touched` splits the touched patches into.
+SPREAD_PARTS = 16
+
 #: Every function to compile, each after the helpers it calls.
 KERNELS = (
     "_factor",
@@ -29,6 +32,11 @@ KERNELS = (
     "unshot_totals",
     "ambient_choice",
     "patch_average",
+    "_near_rows",
+    "_subarea_shots",
+    "_captures",
+    "_far_sums",
+    "_far_patches",
     "shoot",
     "column_sweep",
     "column_final",
@@ -42,8 +50,8 @@ def _spread_row(
     u2,
     patch_entries,
     patch_ptr,
-    entry_receiver,
-    entry_weight,
+    patch_receiver,
+    patch_weight,
     radiosity,
     entry_shot,
     spread,
@@ -51,13 +59,14 @@ def _spread_row(
 ):
     """Patch ``p``'s ``sum_k W_pk |dB_pk - dB_p|`` and ``max_k |dB_pk|`` into row ``p`` of
     ``spread`` and ``peak``, its unshot radiosity ``dB_p`` being (u0, u1, u2): its entries
-    (``patch_entries[patch_ptr[p]:patch_ptr[p + 1]]``, ascending) summed from zero in that
-    order."""
+    (``patch_entries[patch_ptr[p]:patch_ptr[p + 1]]``, ascending; their receivers and
+    weights ``patch_receiver`` and ``patch_weight`` in the same order) summed from zero in
+    that order."""
     s0 = s1 = s2 = m0 = m1 = m2 = 0.0
     for q in range(patch_ptr[p], patch_ptr[p + 1]):
         e = patch_entries[q]
-        k = entry_receiver[e]
-        w = entry_weight[e]
+        k = patch_receiver[q]
+        w = patch_weight[q]
         own0 = radiosity[k, 0] - entry_shot[e, 0]
         own1 = radiosity[k, 1] - entry_shot[e, 1]
         own2 = radiosity[k, 2] - entry_shot[e, 2]
@@ -75,8 +84,8 @@ def patch_spread_rows(
     rows,
     patch_entries,
     patch_ptr,
-    entry_receiver,
-    entry_weight,
+    patch_receiver,
+    patch_weight,
     radiosity,
     entry_shot,
     unshot,
@@ -96,8 +105,8 @@ def patch_spread_rows(
             unshot[p, 2],
             patch_entries,
             patch_ptr,
-            entry_receiver,
-            entry_weight,
+            patch_receiver,
+            patch_weight,
             radiosity,
             entry_shot,
             spread,
@@ -109,8 +118,8 @@ def spread_touched(
     touched,
     patch_entries,
     patch_ptr,
-    entry_receiver,
-    entry_weight,
+    patch_receiver,
+    patch_weight,
     radiosity,
     entry_shot,
     patch_radiosity,
@@ -120,10 +129,32 @@ def spread_touched(
 ):
     """:func:`patch_spread_rows` over the patches marked in ``touched`` ((P,) bool),
     whose marks it clears, their unshot radiosity taken as ``patch_radiosity - shot``
-    (see :meth:`raytrad.core.system.DiscreteSystem.respread`)."""
-    for p in prange(len(touched)):  # rows apart: the same sums on any number of threads
+    (see :meth:`raytrad.core.system.DiscreteSystem.respread`). The marked patches go
+    in :data:`SPREAD_PARTS` runs of about equal entries, so that two threads share the
+    work whichever patches a shot touched; each patch is summed alone, the same on any
+    number of threads."""
+    rows = np.empty(len(touched), dtype=np.int64)
+    count = 0
+    total = 0
+    for p in range(len(touched)):
         if touched[p]:
             touched[p] = False
+            rows[count] = p
+            count += 1
+            total += patch_ptr[p + 1] - patch_ptr[p]
+    parts = SPREAD_PARTS
+    ends = np.full(parts + 1, count, dtype=np.int64)
+    ends[0] = 0
+    summed = 0
+    part = 1
+    for i in range(count):
+        summed += patch_ptr[rows[i] + 1] - patch_ptr[rows[i]]
+        while part < parts and summed * parts >= total * part:
+            ends[part] = i + 1
+            part += 1
+    for part in prange(parts):  # runs of rows apart: the same sums on any number of threads
+        for i in range(ends[part], ends[part + 1]):
+            p = rows[i]
             _spread_row(
                 p,
                 patch_radiosity[p, 0] - shot[p, 0],
@@ -131,8 +162,8 @@ def spread_touched(
                 patch_radiosity[p, 2] - shot[p, 2],
                 patch_entries,
                 patch_ptr,
-                entry_receiver,
-                entry_weight,
+                patch_receiver,
+                patch_weight,
                 radiosity,
                 entry_shot,
                 spread,
@@ -232,6 +263,86 @@ def _first_at_least(values, count, bound):
     return lo
 
 
+def _near_rows(receivers, near_receivers, near):
+    """The rows of ``near_receivers`` in ``receivers`` (both ascending) into ``near``."""
+    r = 0
+    for g in range(len(near_receivers)):
+        while receivers[r] != near_receivers[g]:
+            r += 1
+        near[g] = r
+
+
+def _subarea_shots(sub_lo, sub_hi, mean_ptr, mean_receivers, mean_shares, base, scratch):
+    """The means of the shooter's receivers' shots over its sub-areas and clusters (nodes
+    ``sub_lo:sub_hi``, CSR ``mean_*``) into ``scratch[base + s]``."""
+    for s in range(sub_lo, sub_hi):
+        m0 = m1 = m2 = 0.0
+        for q in range(mean_ptr[s], mean_ptr[s + 1]):
+            share = mean_shares[q]
+            source = mean_receivers[q]
+            m0 += share * scratch[source, 0]
+            m1 += share * scratch[source, 1]
+            m2 += share * scratch[source, 2]
+        scratch[base + s, 0], scratch[base + s, 1], scratch[base + s, 2] = m0, m1, m2
+
+
+def _captures(b, blocks, near, receivers, raw_factors, row_scale, column_scale, area):
+    """``sum_j a_j F_jp`` over the far and over the near receivers (rows ``near``) of
+    block ``b`` of ``blocks`` of a column [m2]."""
+    count = len(receivers)
+    r0 = count * b // blocks
+    r1 = count * (b + 1) // blocks
+    g = _first_at_least(near, len(near), r0)
+    far = close = 0.0
+    for r in range(r0, r1):
+        k = receivers[r]
+        f = _factor(r, k, raw_factors, row_scale, column_scale)
+        if g < len(near) and near[g] == r:
+            g += 1
+            close += area[k] * f
+        else:
+            far += area[k] * f
+    return far, close
+
+
+def _far_sums(b, k, f, area, reflectance, receiver_ptr, entry_patch, entry_weight, far_held, part):
+    """Far receiver ``k`` of factor ``f`` into block ``b``'s plan sums: ``a_k rho_k f``
+    into ``part[b, 6:9]``, ``W_qk rho_k f`` into ``far_held[b, q]`` for its patches."""
+    a = area[k]
+    for c in range(3):
+        part[b, 6 + c] += a * reflectance[k, c] * f
+    for e in range(receiver_ptr[k], receiver_ptr[k + 1]):
+        p = entry_patch[e]
+        w = entry_weight[e]
+        for c in range(3):
+            far_held[b, p, c] += w * reflectance[k, c] * f
+
+
+def _far_patches(far_held):
+    """The patches with a sum in ``far_held`` ((B, P, 3), left zero) and their sums over
+    the blocks in order: (Q,) int32 ascending, (Q, 3)."""
+    blocks, count = far_held.shape[0], far_held.shape[1]
+    kept = np.zeros(count, dtype=np.bool_)
+    total = 0
+    for p in range(count):
+        for b in range(blocks):
+            if far_held[b, p, 0] != 0.0 or far_held[b, p, 1] != 0.0 or far_held[b, p, 2] != 0.0:
+                kept[p] = True
+        total += kept[p]
+    patches = np.empty(total, dtype=np.int32)
+    values = np.zeros((total, 3))
+    i = 0
+    for p in range(count):
+        if kept[p]:
+            patches[i] = p
+            for b in range(blocks):
+                for c in range(3):
+                    values[i, c] += far_held[b, p, c]
+                    far_held[b, p, c] = 0.0
+            i += 1
+    return patches, values
+
+
 def shoot(
     entries,
     entry_receiver,
@@ -263,21 +374,39 @@ def shoot(
     base,
     touched,
     held,
+    far_held,
+    near,
+    sums,
+    plan_patches,
+    plan_values,
+    known,
 ):
     """One shot through a cached column, in place (see
-    :func:`raytrad.core.shot.numpy_shoot`, the reference, for the steps). Returns the
-    power caught by the receivers, the power they reflect ((3,) each, [W]) and
-    ``sum_j a_j F_jp`` [m2]. The patch's sub-areas and clusters (nodes ``sub_lo:sub_hi``)
-    get the means of its receivers' shots at ``scratch[base + s]`` (their CSR ``mean_*``).
-    ``radiosity`` (``emission + reflectance * irradiance``) is kept with the irradiance.
-    The column's factors are ``raw_factors * (row_scale[receivers] * column_scale)``
-    (balanced; ``raw_factors`` when ``row_scale`` is empty). The patches of the column's
-    receivers (whose radiosity changes) are marked in ``touched`` ((P,) bool).
+        :func:`raytrad.core.shot.numpy_shoot`, the reference, for the steps). Returns the
+        power caught by the receivers, the power they reflect ((3,) each, [W]),
+        ``sum_j a_j F_jp`` [m2] and the column's far patches and sums (below). The patch's
+        sub-areas and clusters (nodes ``sub_lo:sub_hi``) get the means of its receivers'
+        shots at ``scratch[base + s]`` (their CSR ``mean_*``). ``radiosity`` (``emission +
+        reflectance * irradiance``) is kept with the irradiance. The column's factors are
+        ``raw_factors * (row_scale[receivers] * column_scale)`` (balanced; ``raw_factors``
+        when ``row_scale`` is empty). The patches whose radiosity changes are marked in
+        ``touched`` ((P,) bool).
 
-    The column's receivers and its near receivers are taken in ``len(held)`` blocks (the
-    same blocks however many threads run them: :data:`PARALLEL`), each summing its
-    power, its near receivers' excess and its patches' new radiosity apart (``held``
-    (B, P, 3) zeros, left zero), and the blocks' sums are added in block order."""
+        The column's receivers and its near receivers are taken in ``len(held)`` blocks (the
+        same blocks however many threads run them: :data:`PARALLEL`), each summing apart
+    (``held`` and ``far_held`` (B, P, 3) zeros, left zero), and the blocks' sums are
+        added in block order.
+
+        A far receiver's irradiance is ``F_jp c`` with ``c`` the same for every far receiver
+        of the shot (the amount, less what the near ones took), so what the far receivers
+        bring to each patch's radiosity and to the power is ``c`` times sums of the column
+        alone. Those, with the rows of its near receivers, are its plan, which every shot of
+        the column reads: ``near`` (G,) int32 rows, ``sums`` (5,): ``sum_j a_j F_jp`` over
+        the far and the near receivers [m2], ``sum_j a_j rho_j F_jp`` over the far ones
+        (3,) [m2]; ``plan_patches`` (Q,) int32 and ``plan_values`` (Q, 3) ``sum_j W_qj
+        rho_j F_jp`` over the far receivers, per patch ``q`` they change [1]. With ``known``
+        False the shot finds the plan first: it fills ``near`` and ``sums`` and returns the
+        patches and their sums (the given ones when ``known``)."""
     count = len(receivers)
     n = len(entries)
     own = np.empty((n, 3))
@@ -301,28 +430,15 @@ def shoot(
         entry_shot[e, 2] += v2
         scratch[k, 0], scratch[k, 1], scratch[k, 2] = v0, v1, v2
     near_count = len(near_receivers)
-    near = np.empty(near_count, dtype=np.int64)
     seen = np.empty((near_count, 3))
     blocks = len(held)
-    part = np.zeros((blocks, 8))
+    part = np.zeros((blocks, 9))
     give0 = give1 = give2 = 0.0
     far_gives = True
-    amount0, amount1, amount2 = amount[0], amount[1], amount[2]
     if near_count:
-        for s in range(sub_lo, sub_hi):
-            m0 = m1 = m2 = 0.0
-            for q in range(mean_ptr[s], mean_ptr[s + 1]):
-                share = mean_shares[q]
-                source = mean_receivers[q]
-                m0 += share * scratch[source, 0]
-                m1 += share * scratch[source, 1]
-                m2 += share * scratch[source, 2]
-            scratch[base + s, 0], scratch[base + s, 1], scratch[base + s, 2] = m0, m1, m2
-        r = 0
-        for g in range(near_count):  # both ascending
-            while receivers[r] != near_receivers[g]:
-                r += 1
-            near[g] = r
+        if not known:
+            _near_rows(receivers, near_receivers, near)
+        _subarea_shots(sub_lo, sub_hi, mean_ptr, mean_receivers, mean_shares, base, scratch)
         for b in prange(blocks):
             e0 = e1 = e2 = 0.0
             for g in range(near_count * b // blocks, near_count * (b + 1) // blocks):
@@ -338,22 +454,14 @@ def shoot(
                 a = area[k]
                 f = _factor(r, k, raw_factors, row_scale, column_scale)
                 seen[g, 0], seen[g, 1], seen[g, 2] = f * seen0, f * seen1, f * seen2
-                e0 += a * (seen[g, 0] - f * amount0)
-                e1 += a * (seen[g, 1] - f * amount1)
-                e2 += a * (seen[g, 2] - f * amount2)
-            r0 = count * b // blocks
-            r1 = count * (b + 1) // blocks
-            g = _first_at_least(near, near_count, r0)
-            far = close = 0.0
-            for r in range(r0, r1):
-                k = receivers[r]
-                f = _factor(r, k, raw_factors, row_scale, column_scale)
-                if g < near_count and near[g] == r:
-                    g += 1
-                    close += area[k] * f
-                else:
-                    far += area[k] * f
-            part[b, 0], part[b, 1], part[b, 2], part[b, 3], part[b, 4] = e0, e1, e2, far, close
+                e0 += a * (seen[g, 0] - f * amount[0])
+                e1 += a * (seen[g, 1] - f * amount[1])
+                e2 += a * (seen[g, 2] - f * amount[2])
+            part[b, 0], part[b, 1], part[b, 2] = e0, e1, e2
+            if not known:
+                part[b, 3], part[b, 4] = _captures(
+                    b, blocks, near, receivers, raw_factors, row_scale, column_scale, area
+                )
         excess0 = excess1 = excess2 = caught = caught_near = 0.0
         for b in range(blocks):
             excess0 += part[b, 0]
@@ -361,6 +469,10 @@ def shoot(
             excess2 += part[b, 2]
             caught += part[b, 3]
             caught_near += part[b, 4]
+        if known:
+            caught, caught_near = sums[0], sums[1]
+        else:
+            sums[0], sums[1] = caught, caught_near
         if not caught > 0.0:
             far_gives = False
             caught = caught_near
@@ -380,30 +492,53 @@ def shoot(
             scratch[base + s, 0] = scratch[base + s, 1] = scratch[base + s, 2] = 0.0
     else:
         far_gives = False
+        if not known:
+            sums[0] = sums[1] = 0.0
+            for b in range(blocks):
+                sums[0] += _captures(
+                    b, blocks, near, receivers, raw_factors, row_scale, column_scale, area
+                )[0]
     for i in range(n):
         k = entry_receiver[entries[i]]
         scratch[k, 0] = scratch[k, 1] = scratch[k, 2] = 0.0
+    # what every far receiver gets per unit factor [W m-2]
+    c0, c1, c2 = amount[0], amount[1], amount[2]
+    if far_gives:
+        c0, c1, c2 = c0 - give0, c1 - give1, c2 - give2
     for b in prange(blocks):
         r0 = count * b // blocks
         r1 = count * (b + 1) // blocks
         g = _first_at_least(near, near_count, r0)
-        p0 = p1 = p2 = q0 = q1 = q2 = capture = 0.0
+        p0 = p1 = p2 = q0 = q1 = q2 = 0.0
         last = -1
         h0 = h1 = h2 = 0.0
         for r in range(r0, r1):
             k = receivers[r]
-            a = area[k]
             f = _factor(r, k, raw_factors, row_scale, column_scale)
-            capture += a * f
             if g < near_count and near[g] == r:
                 v0, v1, v2 = seen[g, 0], seen[g, 1], seen[g, 2]
                 g += 1
-            elif far_gives:
-                v0 = f * amount0 - f * give0
-                v1 = f * amount1 - f * give1
-                v2 = f * amount2 - f * give2
             else:
-                v0, v1, v2 = f * amount0, f * amount1, f * amount2
+                irradiance[k, 0] += f * c0
+                irradiance[k, 1] += f * c1
+                irradiance[k, 2] += f * c2
+                for c in range(3):
+                    radiosity[k, c] = emission[k, c] + reflectance[k, c] * irradiance[k, c]
+                if not known:
+                    _far_sums(
+                        b,
+                        k,
+                        f,
+                        area,
+                        reflectance,
+                        receiver_ptr,
+                        entry_patch,
+                        entry_weight,
+                        far_held,
+                        part,
+                    )
+                continue
+            a = area[k]
             irradiance[k, 0] += v0
             irradiance[k, 1] += v1
             irradiance[k, 2] += v2
@@ -434,22 +569,38 @@ def shoot(
         if last >= 0:
             held[b, last, 0], held[b, last, 1], held[b, last, 2] = h0, h1, h2
         part[b, 0], part[b, 1], part[b, 2] = p0, p1, p2
-        part[b, 3], part[b, 4], part[b, 5], part[b, 6] = q0, q1, q2, capture
+        part[b, 3], part[b, 4], part[b, 5] = q0, q1, q2
+    if not known:
+        for c in range(3):
+            sums[2 + c] = 0.0
+            for b in range(blocks):
+                sums[2 + c] += part[b, 6 + c]
+        plan_patches, plan_values = _far_patches(far_held)
     power = np.zeros(3)
     reflected = np.zeros(3)
-    capture = 0.0
     for b in range(blocks):
         for c in range(3):
             power[c] += part[b, c]
             reflected[c] += part[b, 3 + c]
-        capture += part[b, 6]
     for p in range(len(touched)):
         if touched[p]:
             for b in range(blocks):
                 for c in range(3):
                     patch_radiosity[p, c] += held[b, p, c]
                     held[b, p, c] = 0.0
-    return power, reflected, capture
+    power[0] += c0 * sums[0]
+    power[1] += c1 * sums[0]
+    power[2] += c2 * sums[0]
+    reflected[0] += c0 * sums[2]
+    reflected[1] += c1 * sums[3]
+    reflected[2] += c2 * sums[4]
+    for i in range(len(plan_patches)):
+        p = plan_patches[i]
+        touched[p] = True
+        patch_radiosity[p, 0] += c0 * plan_values[i, 0]
+        patch_radiosity[p, 1] += c1 * plan_values[i, 1]
+        patch_radiosity[p, 2] += c2 * plan_values[i, 2]
+    return power, reflected, sums[0] + sums[1], plan_patches, plan_values
 
 
 def column_sweep(rows, values, receiver_area, row_scale, patch_area, closed, limit, row_sum):

@@ -22,20 +22,23 @@ from raytrad.core.system import DiscreteSystem
 from raytrad.core.visibility import worker_count
 
 
-def respread(problem: DiscreteSystem, state: SolverState, fast: Any) -> None:
+def respread(problem: DiscreteSystem, state: SolverState, fast: Any, loops: Any = None) -> None:
     """The state's spread and peak after a shot: the patches it touched summed again
-    (:meth:`raytrad.core.system.DiscreteSystem.respread`), in place when compiled."""
+    (:meth:`raytrad.core.system.DiscreteSystem.respread`), in place when compiled.
+    ``loops``: :func:`raytrad.core.compiled.solver_loops` of ``fast`` (found here when
+    None)."""
     if fast is None:
         state.spread, state.peak = problem.respread(
             state.spread, state.peak, state.radiosity, state.entry_shot, state.unshot
         )
         return
-    compiled.solver_loops(fast, worker_count()).spread_touched(
+    loops = loops or compiled.solver_loops(fast, worker_count())
+    loops.spread_touched(
         problem.touched,
         problem.patch_entries,
         problem.patch_ptr,
-        problem.entry_receiver,
-        problem.entry_weight,
+        problem.patch_receiver,
+        problem.patch_weight,
         state.radiosity,
         state.entry_shot,
         state.patch_radiosity,
@@ -51,22 +54,28 @@ def shoot(
     engine: FormFactorEngine,
     patch: int,
     amount: np.ndarray,
+    loops: Any = None,
 ) -> None:
     """Shoot ``amount`` ((3,) [W m-2]) from ``patch`` through its form-factor column: one
     compiled loop when available (:mod:`raytrad.core.compiled`), which balances the raw
-    column as it goes, else :func:`numpy_shoot`, the reference it is tested against."""
+    column as it goes, else :func:`numpy_shoot`, the reference it is tested against.
+    ``loops``: :func:`raytrad.core.compiled.solver_loops` to shoot with (found here when
+    None; the solve finds them once)."""
     if state.radiosity.shape != state.irradiance.shape:  # a state :func:`solve` did not set
         state.radiosity = problem.receiver_radiosity(state.irradiance)
-    fast = compiled.get()
-    if fast is None:
-        numpy_shoot(problem, state, engine, patch, amount)
-        return
-    loops = compiled.solver_loops(fast, worker_count())
+    if loops is None:
+        fast = compiled.get()
+        if fast is None:
+            numpy_shoot(problem, state, engine, patch, amount)
+            return
+        loops = compiled.solver_loops(fast, worker_count())
     column = engine.raw_column(patch)
-    row_scale, column_scale = engine.column_scales(patch)
+    scales = engine.column_scales(patch)
+    row_scale, column_scale = scales
     gather = column.gather
     means = problem.subarea_means
-    power, reflected, capture = loops.shoot(
+    plan, known = problem.plans.get(engine, patch, len(gather.receivers), scales)
+    power, reflected, capture, *found = loops.shoot(
         problem.patch_entries[problem.patch_ptr[patch] : problem.patch_ptr[patch + 1]],
         problem.entry_receiver,
         problem.entry_weight,
@@ -97,7 +106,12 @@ def shoot(
         means.base,
         problem.touched,
         problem.held,
+        problem.far_held,
+        *plan,
+        known,
     )
+    if not known:
+        problem.plans.keep(patch, (*plan[:2], *found), scales)
     problem.touched[patch] = True  # its receivers' shots and its own shot changed
     area_p = problem.patch_area[patch]
     state.shot[patch] += amount

@@ -52,6 +52,7 @@ from raytrad.core.shot import respread
 from raytrad.core.shot import shoot as _shoot
 from raytrad.core.solver_state import SolverState
 from raytrad.core.system import DiscreteSystem
+from raytrad.core.visibility import worker_count
 from raytrad.errors import SettingsError, SolverError
 
 log = logging.getLogger(__name__)
@@ -354,6 +355,7 @@ def solve(
     emitters = np.flatnonzero((problem.average(everyone, problem.receiver_emission) > 0).any(1))
     direct = False
     fast = compiled.get()
+    loops = None if fast is None else compiled.solver_loops(fast, worker_count())
     choose = _compiled_choice(settings.method, fast)
     totals = unshot_totals(problem, state, fast)
     while not reason:
@@ -371,8 +373,8 @@ def solve(
         if top <= 0:
             reason = "converged"
             break
-        _shoot(problem, state, engine, patch, amount)
-        respread(problem, state, fast)
+        _shoot(problem, state, engine, patch, amount, loops)
+        respread(problem, state, fast, loops)
         state.rays = rays_before + engine.rays_cast
         state.seconds = time.perf_counter() - start
         totals = unshot_totals(problem, state, fast)

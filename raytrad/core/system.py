@@ -9,7 +9,8 @@ computes what the solver needs of it per shot.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import weakref
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -22,6 +23,50 @@ from raytrad.core.mesh import RadiosityMesh
 #: (:mod:`raytrad.core._compiled_solver`): fixed, so that a shot's sums are the same on
 #: one thread or several.
 SHOT_BLOCKS = 8
+#: Bytes :class:`ShotPlans` may hold; a column beyond them finds its plan at every shot.
+PLAN_BYTES = 64 << 20
+
+
+class ShotPlans:
+    """What the compiled shots of one column share, its plan (see ``shoot`` in
+    :mod:`raytrad.core._compiled_solver`): the rows of its near receivers in the column
+    ((G,) int32), its sums ((5,) [m2]) and the patches its far receivers change with
+    their sums ((Q,) int32, (Q, 3) [1]). Kept per patch for one form-factor engine and
+    its balancing scales, in at most :data:`PLAN_BYTES`. A column's first shot finds its
+    plan, the next ones read it; a column whose plan is not kept finds it at every shot,
+    the same to the bit."""
+
+    def __init__(self) -> None:
+        self._engine: Any = None
+        self._plans: dict[int, tuple[tuple[np.ndarray, ...], Any, float, int]] = {}
+        self.bytes = 0
+
+    def get(
+        self, engine: Any, patch: int, near_count: int, scales: tuple[Any, float]
+    ) -> tuple[tuple[np.ndarray, ...], bool]:
+        """(the plan's four arrays, whether they are known) for the column of ``patch``
+        of ``engine`` at balancing ``scales`` (row scales, column scale); arrays for the
+        shot to fill, with False, until :meth:`keep` has kept them."""
+        if self._engine is None or self._engine() is not engine:
+            self._engine = weakref.ref(engine)
+            self._plans.clear()
+            self.bytes = 0
+        plan = self._plans.get(patch)
+        if plan is not None and plan[1] is scales[0] and plan[2] == scales[1]:
+            return plan[0], True
+        empty = (np.zeros(near_count, np.int32), np.zeros(5), np.zeros(0, np.int32))
+        return (*empty, np.zeros((0, 3))), False
+
+    def keep(self, patch: int, plan: tuple[np.ndarray, ...], scales: tuple[Any, float]) -> None:
+        """Keep the plan a shot of ``patch`` found (in place of one for other scales),
+        while the bytes allow."""
+        size = sum(array.nbytes for array in plan) + 512  # the tuples, the arrays' headers
+        stale = self._plans.pop(patch, None)
+        if stale is not None:
+            self.bytes -= stale[3]
+        if self.bytes + size <= PLAN_BYTES:
+            self.bytes += size
+            self._plans[patch] = (plan, scales[0], scales[1], size)
 
 
 @dataclass(frozen=True)
@@ -39,11 +84,15 @@ class DiscreteSystem:
     entry_receiver: np.ndarray  # (nnz,)
     patch_entries: np.ndarray  # (nnz,) entries grouped by patch
     patch_ptr: np.ndarray  # (P + 1,) CSR pointers into patch_entries
+    patch_receiver: np.ndarray  # (nnz,) entry_receiver[patch_entries], read by patch
+    patch_weight: np.ndarray  # (nnz,) entry_weight[patch_entries], read by patch
     subarea_means: SubareaMeans  # the near-field gather's sources beyond the receivers
     patch_nodes: np.ndarray  # (P + 1,) each patch's sub-areas and clusters, CSR pointers
     scratch: np.ndarray  # (R + N, 3) zeros, a work array of _shoot
     touched: np.ndarray  # (P,) bool: the patches a shot changed (see respread)
     held: np.ndarray  # (SHOT_BLOCKS, P, 3) zeros, a work array of the compiled shot
+    far_held: np.ndarray  # (SHOT_BLOCKS, P, 3) zeros, another
+    plans: ShotPlans = field(default_factory=ShotPlans)  # the compiled shot's, per column
 
     @classmethod
     def from_mesh(cls, mesh: RadiosityMesh, means: SubareaMeans | None = None) -> DiscreteSystem:
@@ -74,12 +123,15 @@ class DiscreteSystem:
             entry_weight=w,
             entry_receiver=r,
             patch_entries=by_patch,
+            patch_receiver=r[by_patch],
+            patch_weight=w[by_patch],
             patch_ptr=np.searchsorted(entry_patch[by_patch], np.arange(mesh.patch_count + 1)),
             subarea_means=means,
             patch_nodes=means.patch_ptr,
             scratch=np.zeros((mesh.receiver_count + len(means.pointer) - 1, 3)),
             touched=np.zeros(mesh.patch_count, dtype=bool),
             held=np.zeros((SHOT_BLOCKS, mesh.patch_count, 3)),
+            far_held=np.zeros((SHOT_BLOCKS, mesh.patch_count, 3)),
         )
 
     def spread(
@@ -149,8 +201,8 @@ class DiscreteSystem:
             rows,
             self.patch_entries,
             self.patch_ptr,
-            self.entry_receiver,
-            self.entry_weight,
+            self.patch_receiver,
+            self.patch_weight,
             np.ascontiguousarray(radiosity),
             np.ascontiguousarray(entry_shot),
             np.ascontiguousarray(unshot),

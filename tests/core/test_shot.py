@@ -8,7 +8,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from raytrad.core import compiled, shot, solver
+from raytrad.core import compiled, shot, solver, system
 from raytrad.core.pipeline import Prepared
 from raytrad.core.solver import SHOOTING_METHODS, SolveResult, SolveSettings, solve
 
@@ -17,6 +17,11 @@ METHODS = list(SHOOTING_METHODS)
 
 def _solve(prepared: Prepared, **settings: object) -> SolveResult:
     return solve(prepared.mesh, prepared.engine, SolveSettings(**settings))  # type: ignore[arg-type]
+
+
+def _numpy_shot(*arguments: object) -> None:
+    """:func:`shot.numpy_shoot` called as the solve calls its shot (the loops last)."""
+    shot.numpy_shoot(*arguments[:5])  # type: ignore[arg-type]
 
 
 @pytest.mark.skipif(compiled.get() is None, reason="numba is not installed")
@@ -28,7 +33,7 @@ def test_compiled_shot_agrees_with_numpy_shot(
     the same shots, radiosity and energy ledger to rounding, near-field gathers included."""
     settings = SolveSettings(method=method, max_shots=300, tolerance=1e-9)
     fast = solve(cornell.mesh, cornell.engine, settings)
-    monkeypatch.setattr(solver, "_shoot", shot.numpy_shoot)
+    monkeypatch.setattr(solver, "_shoot", _numpy_shot)
     slow = solve(cornell.mesh, cornell.engine, settings)
     assert any(len(g.receivers) for _, _, g in cornell.engine.near_field())
     assert fast.state.shots == slow.state.shots == 300
@@ -60,3 +65,61 @@ def test_the_parallel_shot_solves_as_the_serial_one_to_the_bit(
     np.testing.assert_array_equal(serial.radiosity, parallel.radiosity)
     for name in ("patch_radiosity", "shot", "entry_shot", "absorbed", "escaped", "spread"):
         np.testing.assert_array_equal(getattr(serial.state, name), getattr(parallel.state, name))
+
+
+@pytest.mark.skipif(compiled.get() is None, reason="numba is not installed")
+def test_a_column_s_plan_gives_the_shot_it_finds_to_the_bit(
+    cornell: Prepared, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The near rows and far and near captures a column's first shot finds and its later
+    shots read (:class:`system.ShotPlans`) are what a shot without them finds: the same
+    solve to the bit with plans kept and with none (no bytes for them)."""
+    read = []
+    get = system.ShotPlans.get
+
+    def counted(self: system.ShotPlans, *arguments: object) -> tuple:
+        plan = get(self, *arguments)  # type: ignore[arg-type]
+        read.append(plan[1])
+        return plan
+
+    monkeypatch.setattr(system.ShotPlans, "get", counted)
+    planned = _solve(cornell, tolerance=1e-5)
+    shooters = int((planned.state.shot != 0).any(axis=1).sum())
+    assert planned.state.shots > 2 * shooters  # columns shot again
+    assert sum(read) == planned.state.shots - shooters  # every later shot read its plan
+    monkeypatch.setattr(system, "PLAN_BYTES", 0)
+    unplanned = _solve(cornell, tolerance=1e-5)
+    assert unplanned.state.shots == planned.state.shots
+    np.testing.assert_array_equal(unplanned.radiosity, planned.radiosity)
+    for name in ("patch_radiosity", "entry_shot", "absorbed", "escaped", "spread", "captured"):
+        np.testing.assert_array_equal(getattr(unplanned.state, name), getattr(planned.state, name))
+
+
+def test_shot_plans_are_kept_for_one_engine_and_its_scales_within_their_bytes(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """A kept plan is read back while the engine and its balancing scales are the same; a
+    new engine, new row scales or a new column scale make it to be found again, and
+    nothing is kept past :data:`system.PLAN_BYTES`."""
+
+    class Engine:
+        pass
+
+    plans = system.ShotPlans()
+    engine, rows = Engine(), np.ones(4)
+    (near, sums, patches, values), known = plans.get(engine, 3, 2, (rows, 0.5))
+    assert not known and near.dtype == patches.dtype == np.int32
+    assert near.shape == (2,) and sums.shape == (5,) and values.shape == (0, 3)
+    near[:], sums[:] = (1, 4), 0.25
+    found = (near, sums, np.array([0, 2], np.int32), np.ones((2, 3)))
+    plans.keep(3, found, (rows, 0.5))
+    again, known = plans.get(engine, 3, 2, (rows, 0.5))
+    assert known and all(a is b for a, b in zip(again, found, strict=True))
+    assert not plans.get(engine, 3, 2, (rows, 0.25))[1]  # another column scale
+    assert not plans.get(engine, 3, 2, (np.ones(4), 0.5))[1]  # other row scales
+    assert not plans.get(engine, 2, 2, (rows, 0.5))[1]  # another patch
+    assert not plans.get(Engine(), 3, 2, (rows, 0.5))[1]  # another engine: all forgotten
+    assert not plans.get(engine, 3, 2, (rows, 0.5))[1] and plans.bytes == 0
+    monkeypatch.setattr(system, "PLAN_BYTES", 100)
+    plans.keep(3, found, (rows, 0.5))
+    assert not plans.get(engine, 3, 2, (rows, 0.5))[1] and plans.bytes == 0
