@@ -19,7 +19,7 @@ Three parts:
    ``RAYTRAD_KERNELS=numpy`` (the numpy reference kernels) in the same process, a last
    row of table 1, and the check that every variant gives the same factors; then, on a
    line of its own, a default solve over the cached columns with the compiled shot and
-   with ``numpy_shoot``, against the pass time. ``--no-numpy`` leaves out the numpy pass
+   with ``numpy_step``, against the pass time. ``--no-numpy`` leaves out the numpy pass
    and shot (minutes on a scene of many thousand triangles).
 3. **Whole renders and scale.** ``raytrad render`` of the scene at each
    ``--receivers``, as a child process: seconds per stage from ``report.json``, shots,
@@ -275,7 +275,7 @@ def pass_table(receivers: int, with_numpy: bool = True) -> None:
         naive = prepared.engine.rays_naive
         factors = [_dense(prepared.engine, p) for p in range(0, prepared.mesh.patch_count, 7)]
         solve_fast, shots = _solve_seconds(prepared, solver._shoot)
-        solve_numpy = _solve_seconds(prepared, shot.numpy_shoot)[0] if with_numpy else None
+        solve_numpy = _solve_seconds(prepared, shot.numpy_step)[0] if with_numpy else None
     finally:
         prepared.close()
     single, packets, rays = _replayed(receivers, cull=True)
@@ -335,7 +335,7 @@ def pass_table(receivers: int, with_numpy: bool = True) -> None:
     )
     print(
         f"\nsolve over the cached columns ({shots} shots): compiled shot {solve_fast:.2f} s "
-        f"({100 * solve_fast / seconds:.0f}% of the pass){shot_text}"
+        f"({100 * solve_fast / seconds:.1f}% of the pass){shot_text}"
     )
 
 

@@ -17,9 +17,9 @@ prange = range
 
 #: Kernels also compiled with ``parallel=True``, as ``<name>_parallel``
 #: (:func:`raytrad.core.compiled.solver_loops` chooses).
-PARALLEL = ("shoot", "spread_touched")
+PARALLEL = ("shoot",)
 
-#: Runs of about equal entries :func:`spread_touched` splits the touched patches into.
+#: Runs of about equal entries :func:`_touched_runs` splits the touched patches into.
 SPREAD_PARTS = 16
 
 #: Every function to compile, each after the helpers it calls.
@@ -28,14 +28,13 @@ KERNELS = (
     "_first_at_least",
     "_spread_row",
     "patch_spread_rows",
-    "spread_touched",
+    "_touched_runs",
     "unshot_totals",
     "ambient_choice",
     "patch_average",
     "_near_rows",
     "_subarea_shots",
     "_captures",
-    "_far_sums",
     "_far_patches",
     "shoot",
     "column_sweep",
@@ -114,25 +113,11 @@ def patch_spread_rows(
         )
 
 
-def spread_touched(
-    touched,
-    patch_entries,
-    patch_ptr,
-    patch_receiver,
-    patch_weight,
-    radiosity,
-    entry_shot,
-    patch_radiosity,
-    shot,
-    spread,
-    peak,
-):
-    """:func:`patch_spread_rows` over the patches marked in ``touched`` ((P,) bool),
-    whose marks it clears, their unshot radiosity taken as ``patch_radiosity - shot``
-    (see :meth:`raytrad.core.system.DiscreteSystem.respread`). The marked patches go
-    in :data:`SPREAD_PARTS` runs of about equal entries, so that two threads share the
-    work whichever patches a shot touched; each patch is summed alone, the same on any
-    number of threads."""
+def _touched_runs(touched, patch_ptr):
+    """The patches marked in ``touched`` ((P,) bool), whose marks it clears, ascending
+    ((M,) int64), and the ends of :data:`SPREAD_PARTS` runs of them of about equal entries
+    ((SPREAD_PARTS + 1,) int64), so that the threads summing their spreads share the
+    work whichever patches a shot touched."""
     rows = np.empty(len(touched), dtype=np.int64)
     count = 0
     total = 0
@@ -152,23 +137,7 @@ def spread_touched(
         while part < parts and summed * parts >= total * part:
             ends[part] = i + 1
             part += 1
-    for part in prange(parts):  # runs of rows apart: the same sums on any number of threads
-        for i in range(ends[part], ends[part + 1]):
-            p = rows[i]
-            _spread_row(
-                p,
-                patch_radiosity[p, 0] - shot[p, 0],
-                patch_radiosity[p, 1] - shot[p, 1],
-                patch_radiosity[p, 2] - shot[p, 2],
-                patch_entries,
-                patch_ptr,
-                patch_receiver,
-                patch_weight,
-                radiosity,
-                entry_shot,
-                spread,
-                peak,
-            )
+    return rows[:count], ends
 
 
 def unshot_totals(patch_radiosity, shot, spread, area):
@@ -305,19 +274,6 @@ def _captures(b, blocks, near, receivers, raw_factors, row_scale, column_scale, 
     return far, close
 
 
-def _far_sums(b, k, f, area, reflectance, receiver_ptr, entry_patch, entry_weight, far_held, part):
-    """Far receiver ``k`` of factor ``f`` into block ``b``'s plan sums: ``a_k rho_k f``
-    into ``part[b, 6:9]``, ``W_qk rho_k f`` into ``far_held[b, q]`` for its patches."""
-    a = area[k]
-    for c in range(3):
-        part[b, 6 + c] += a * reflectance[k, c] * f
-    for e in range(receiver_ptr[k], receiver_ptr[k + 1]):
-        p = entry_patch[e]
-        w = entry_weight[e]
-        for c in range(3):
-            far_held[b, p, c] += w * reflectance[k, c] * f
-
-
 def _far_patches(far_held):
     """The patches with a sum in ``far_held`` ((B, P, 3), left zero) and their sums over
     the blocks in order: (Q,) int32 ascending, (Q, 3)."""
@@ -344,15 +300,19 @@ def _far_patches(far_held):
 
 
 def shoot(
-    entries,
-    entry_receiver,
+    patch,
+    amount,
+    patch_entries,
+    patch_ptr,
+    patch_receiver,
+    patch_weight,
+    receiver_ptr,
+    entry_patch,
     entry_weight,
     emission,
     reflectance,
-    irradiance,
-    radiosity,
-    entry_shot,
-    amount,
+    area,
+    patch_area,
     receivers,
     raw_factors,
     row_scale,
@@ -361,17 +321,23 @@ def shoot(
     near_pointer,
     near_sources,
     near_weights,
-    area,
-    receiver_ptr,
-    entry_patch,
-    patch_radiosity,
-    scratch,
     sub_lo,
     sub_hi,
     mean_ptr,
     mean_receivers,
     mean_shares,
     base,
+    irradiance,
+    radiosity,
+    entry_shot,
+    patch_radiosity,
+    shot,
+    absorbed,
+    escaped,
+    captured,
+    spread,
+    peak,
+    scratch,
     touched,
     held,
     far_held,
@@ -381,40 +347,48 @@ def shoot(
     plan_values,
     known,
 ):
-    """One shot through a cached column, in place (see
-        :func:`raytrad.core.shot.numpy_shoot`, the reference, for the steps). Returns the
-        power caught by the receivers, the power they reflect ((3,) each, [W]),
-        ``sum_j a_j F_jp`` [m2] and the column's far patches and sums (below). The patch's
-        sub-areas and clusters (nodes ``sub_lo:sub_hi``) get the means of its receivers'
-        shots at ``scratch[base + s]`` (their CSR ``mean_*``). ``radiosity`` (``emission +
-        reflectance * irradiance``) is kept with the irradiance. The column's factors are
-        ``raw_factors * (row_scale[receivers] * column_scale)`` (balanced; ``raw_factors``
-        when ``row_scale`` is empty). The patches whose radiosity changes are marked in
-        ``touched`` ((P,) bool).
+    """Shoot ``amount`` ((3,) [W m-2]) from ``patch`` through its cached column, in place,
+    and bring the state's spread up to date after it (see
+    :func:`raytrad.core.shot.numpy_shoot`, the reference, for the steps, and
+    :meth:`raytrad.core.system.DiscreteSystem.respread`). Returns the unshot power
+    ``sum_p A_p |dB_p|`` and ``sum_p A_p (|dB_p| + spread_p)`` after the shot [W]
+    (:func:`unshot_totals`), and the column's far patches and sums (below).
 
-        The column's receivers and its near receivers are taken in ``len(held)`` blocks (the
-        same blocks however many threads run them: :data:`PARALLEL`), each summing apart
+    The arguments are the system's (:class:`raytrad.core.system.DiscreteSystem`), the
+    column's (its receivers, raw factors and balancing scales: its factors are
+    ``raw_factors * (row_scale[receivers] * column_scale)``, ``raw_factors`` when
+    ``row_scale`` is empty; its near receivers' gather), the patch's sub-areas and
+    clusters (nodes ``sub_lo:sub_hi``, which get the means of its receivers' shots at
+    ``scratch[base + s]``), the state's (:class:`raytrad.core.solver_state.SolverState`;
+    ``radiosity``, ``emission + reflectance * irradiance``, is kept with the
+    irradiance), work arrays and the column's plan. The patches whose radiosity or shot
+    changes are marked in ``touched`` ((P,) bool) and summed again for their spread,
+    which clears the marks.
+
+    The column's receivers and its near receivers are taken in ``len(held)`` blocks (the
+    same blocks however many threads run them: :data:`PARALLEL`), each summing apart
     (``held`` and ``far_held`` (B, P, 3) zeros, left zero), and the blocks' sums are
-        added in block order.
+    added in block order; the spread sums each patch apart.
 
-        A far receiver's irradiance is ``F_jp c`` with ``c`` the same for every far receiver
-        of the shot (the amount, less what the near ones took), so what the far receivers
-        bring to each patch's radiosity and to the power is ``c`` times sums of the column
-        alone. Those, with the rows of its near receivers, are its plan, which every shot of
-        the column reads: ``near`` (G,) int32 rows, ``sums`` (5,): ``sum_j a_j F_jp`` over
-        the far and the near receivers [m2], ``sum_j a_j rho_j F_jp`` over the far ones
-        (3,) [m2]; ``plan_patches`` (Q,) int32 and ``plan_values`` (Q, 3) ``sum_j W_qj
-        rho_j F_jp`` over the far receivers, per patch ``q`` they change [1]. With ``known``
-        False the shot finds the plan first: it fills ``near`` and ``sums`` and returns the
-        patches and their sums (the given ones when ``known``)."""
+    A far receiver's irradiance is ``F_jp c`` with ``c`` the same for every far receiver
+    of the shot (the amount, less what the near ones took), so what the far receivers
+    bring to each patch's radiosity and to the power is ``c`` times sums of the column
+    alone. Those, with the rows of its near receivers, are its plan, which every shot of
+    the column reads: ``near`` (G,) int32 rows, ``sums`` (5,): ``sum_j a_j F_jp`` over
+    the far and the near receivers [m2], ``sum_j a_j rho_j F_jp`` over the far ones
+    (3,) [m2]; ``plan_patches`` (Q,) int32 and ``plan_values`` (Q, 3) ``sum_j W_qj
+    rho_j F_jp`` over the far receivers, per patch ``q`` they change [1]. With ``known``
+    False the shot finds the plan first: it fills ``near`` and ``sums`` and returns the
+    patches and their sums (the given ones when ``known``)."""
     count = len(receivers)
-    n = len(entries)
+    first = patch_ptr[patch]
+    n = patch_ptr[patch + 1] - first
     own = np.empty((n, 3))
     mean0 = mean1 = mean2 = 0.0
     for i in range(n):
-        e = entries[i]
-        k = entry_receiver[e]
-        w = entry_weight[e]
+        e = patch_entries[first + i]
+        k = patch_receiver[first + i]
+        w = patch_weight[first + i]
         for c in range(3):
             own[i, c] = radiosity[k, c] - entry_shot[e, c]
         mean0 += w * own[i, 0]
@@ -422,8 +396,8 @@ def shoot(
         mean2 += w * own[i, 2]
     over0, over1, over2 = amount[0] - mean0, amount[1] - mean1, amount[2] - mean2
     for i in range(n):
-        e = entries[i]
-        k = entry_receiver[e]
+        e = patch_entries[first + i]
+        k = patch_receiver[first + i]
         v0, v1, v2 = own[i, 0] + over0, own[i, 1] + over1, own[i, 2] + over2
         entry_shot[e, 0] += v0
         entry_shot[e, 1] += v1
@@ -499,7 +473,7 @@ def shoot(
                     b, blocks, near, receivers, raw_factors, row_scale, column_scale, area
                 )[0]
     for i in range(n):
-        k = entry_receiver[entries[i]]
+        k = patch_receiver[first + i]
         scratch[k, 0] = scratch[k, 1] = scratch[k, 2] = 0.0
     # what every far receiver gets per unit factor [W m-2]
     c0, c1, c2 = amount[0], amount[1], amount[2]
@@ -509,9 +483,9 @@ def shoot(
         r0 = count * b // blocks
         r1 = count * (b + 1) // blocks
         g = _first_at_least(near, near_count, r0)
-        p0 = p1 = p2 = q0 = q1 = q2 = 0.0
-        last = -1
-        h0 = h1 = h2 = 0.0
+        p0 = p1 = p2 = q0 = q1 = q2 = t0 = t1 = t2 = 0.0
+        last = far_last = -1
+        h0 = h1 = h2 = s0 = s1 = s2 = 0.0
         for r in range(r0, r1):
             k = receivers[r]
             f = _factor(r, k, raw_factors, row_scale, column_scale)
@@ -524,19 +498,27 @@ def shoot(
                 irradiance[k, 2] += f * c2
                 for c in range(3):
                     radiosity[k, c] = emission[k, c] + reflectance[k, c] * irradiance[k, c]
-                if not known:
-                    _far_sums(
-                        b,
-                        k,
-                        f,
-                        area,
-                        reflectance,
-                        receiver_ptr,
-                        entry_patch,
-                        entry_weight,
-                        far_held,
-                        part,
-                    )
+                if known:
+                    continue
+                # the plan: this far receiver's a rho F and W rho F per unit shot
+                u0, u1, u2 = reflectance[k, 0] * f, reflectance[k, 1] * f, reflectance[k, 2] * f
+                a = area[k]
+                t0 += a * u0
+                t1 += a * u1
+                t2 += a * u2
+                for e in range(receiver_ptr[k], receiver_ptr[k + 1]):
+                    w = entry_weight[e]
+                    p = entry_patch[e]
+                    if p != far_last:
+                        if far_last >= 0:
+                            far_held[b, far_last, 0] = s0
+                            far_held[b, far_last, 1] = s1
+                            far_held[b, far_last, 2] = s2
+                        far_last = p
+                        s0, s1, s2 = far_held[b, p, 0], far_held[b, p, 1], far_held[b, p, 2]
+                    s0 += w * u0
+                    s1 += w * u1
+                    s2 += w * u2
                 continue
             a = area[k]
             irradiance[k, 0] += v0
@@ -568,8 +550,12 @@ def shoot(
                 h2 += w * b2
         if last >= 0:
             held[b, last, 0], held[b, last, 1], held[b, last, 2] = h0, h1, h2
+        if far_last >= 0:
+            far_held[b, far_last, 0], far_held[b, far_last, 1] = s0, s1
+            far_held[b, far_last, 2] = s2
         part[b, 0], part[b, 1], part[b, 2] = p0, p1, p2
         part[b, 3], part[b, 4], part[b, 5] = q0, q1, q2
+        part[b, 6], part[b, 7], part[b, 8] = t0, t1, t2
     if not known:
         for c in range(3):
             sums[2 + c] = 0.0
@@ -600,7 +586,33 @@ def shoot(
         patch_radiosity[p, 0] += c0 * plan_values[i, 0]
         patch_radiosity[p, 1] += c1 * plan_values[i, 1]
         patch_radiosity[p, 2] += c2 * plan_values[i, 2]
-    return power, reflected, sums[0] + sums[1], plan_patches, plan_values
+    area_p = patch_area[patch]
+    for c in range(3):
+        shot[patch, c] += amount[c]
+        absorbed[c] += power[c] - reflected[c]
+        escaped[c] += area_p * amount[c] - power[c]
+    captured[patch] = (sums[0] + sums[1]) / area_p
+    touched[patch] = True  # its receivers' shots and its own shot changed
+    rows, ends = _touched_runs(touched, patch_ptr)
+    for run in prange(SPREAD_PARTS):  # rows apart: the same sums on any number of threads
+        for i in range(ends[run], ends[run + 1]):
+            p = rows[i]
+            _spread_row(
+                p,
+                patch_radiosity[p, 0] - shot[p, 0],
+                patch_radiosity[p, 1] - shot[p, 1],
+                patch_radiosity[p, 2] - shot[p, 2],
+                patch_entries,
+                patch_ptr,
+                patch_receiver,
+                patch_weight,
+                radiosity,
+                entry_shot,
+                spread,
+                peak,
+            )
+    absolute, magnitude = unshot_totals(patch_radiosity, shot, spread, patch_area)
+    return absolute, magnitude, plan_patches, plan_values
 
 
 def column_sweep(rows, values, receiver_area, row_scale, patch_area, closed, limit, row_sum):

@@ -167,11 +167,11 @@ def _renamed(function: Any, name: str) -> Any:
 
 
 def solver_loops(fast: SimpleNamespace, wanted: int) -> SimpleNamespace:
-    """The solver's loops of the compiled kernels ``fast`` (``shoot``,
-    ``spread_touched``) to call from this thread: their ``parallel=True`` copies when
+    """The solver's loop of the compiled kernels ``fast`` (``shoot``, the shot and the
+    spread after it) to call from this thread: its ``parallel=True`` copy when
     :func:`solver_threads` of ``wanted`` threads is above 1, numba's threads set to that
-    in this thread, else the loops themselves. Both give the same results to the bit
-    (their blocks and rows are summed apart and added in order)."""
+    in this thread, else the loop itself. Both give the same results to the bit (their
+    blocks and rows are summed apart and added in order)."""
     threads = solver_threads(wanted)
     parallel = threads > 1 and hasattr(fast, "shoot_parallel")
     if parallel and getattr(_THREAD, "threads", 0) != threads:
@@ -183,10 +183,7 @@ def solver_loops(fast: SimpleNamespace, wanted: int) -> SimpleNamespace:
     loops = _STATE.get("solver_loops")
     if loops is None or loops[0] != key:
         suffix = "_parallel" if parallel else ""
-        chosen = SimpleNamespace(
-            shoot=getattr(fast, "shoot" + suffix),
-            spread_touched=getattr(fast, "spread_touched" + suffix),
-        )
+        chosen = SimpleNamespace(shoot=getattr(fast, "shoot" + suffix))
         loops = _STATE["solver_loops"] = (key, chosen)
     return loops[1]
 

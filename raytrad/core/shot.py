@@ -3,10 +3,11 @@
 A patch shoots an amount of radiosity through its column (the receivers that see it and
 their factors, :mod:`raytrad.core.formfactor`): every receiver of the column gains
 irradiance, its radiosity and the patch averages it belongs to change, and the shooter's
-receivers record what they shot. :func:`shoot` runs the compiled loop
-(:mod:`raytrad.core.compiled`) when available, :func:`numpy_shoot` (the reference it is
-tested against) otherwise; :func:`respread` brings the patches' spread up to date after a
-shot. The solve that chooses the shooters is :mod:`raytrad.core.solver`'s.
+receivers record what they shot; then the spread of the patches it changed is summed
+again, and the unshot power the solve watches is totalled (:func:`unshot_totals`).
+:func:`shoot` does all three in one compiled loop (:mod:`raytrad.core.compiled`) when
+available, with :func:`numpy_shoot` (the reference it is tested against) otherwise. The
+solve that chooses the shooters is :mod:`raytrad.core.solver`'s.
 """
 
 from __future__ import annotations
@@ -22,30 +23,20 @@ from raytrad.core.system import DiscreteSystem
 from raytrad.core.visibility import worker_count
 
 
-def respread(problem: DiscreteSystem, state: SolverState, fast: Any, loops: Any = None) -> None:
-    """The state's spread and peak after a shot: the patches it touched summed again
-    (:meth:`raytrad.core.system.DiscreteSystem.respread`), in place when compiled.
-    ``loops``: :func:`raytrad.core.compiled.solver_loops` of ``fast`` (found here when
-    None)."""
-    if fast is None:
-        state.spread, state.peak = problem.respread(
-            state.spread, state.peak, state.radiosity, state.entry_shot, state.unshot
+def unshot_totals(
+    problem: DiscreteSystem, state: SolverState, fast: Any = None
+) -> tuple[float, float]:
+    """``sum_p A_p |dB_p|`` and ``sum_p A_p (|dB_p| + spread_p)``, each summed over the
+    channels [W]: the unshot power the divergence guards watch, and the residual's
+    numerator. ``fast``: the compiled kernels (:func:`raytrad.core.compiled.get`), or
+    None for numpy (the reference)."""
+    if fast is not None:
+        absolute, magnitude = fast.unshot_totals(
+            state.patch_radiosity, state.shot, state.spread, problem.patch_area
         )
-        return
-    loops = loops or compiled.solver_loops(fast, worker_count())
-    loops.spread_touched(
-        problem.touched,
-        problem.patch_entries,
-        problem.patch_ptr,
-        problem.patch_receiver,
-        problem.patch_weight,
-        state.radiosity,
-        state.entry_shot,
-        state.patch_radiosity,
-        state.shot,
-        state.spread,
-        state.peak,
-    )
+        return float(absolute), float(magnitude)
+    area = problem.patch_area
+    return float((area @ np.abs(state.unshot)).sum()), float((area @ state.unshot_magnitude).sum())
 
 
 def shoot(
@@ -55,19 +46,22 @@ def shoot(
     patch: int,
     amount: np.ndarray,
     loops: Any = None,
-) -> None:
-    """Shoot ``amount`` ((3,) [W m-2]) from ``patch`` through its form-factor column: one
-    compiled loop when available (:mod:`raytrad.core.compiled`), which balances the raw
-    column as it goes, else :func:`numpy_shoot`, the reference it is tested against.
-    ``loops``: :func:`raytrad.core.compiled.solver_loops` to shoot with (found here when
-    None; the solve finds them once)."""
+) -> tuple[float, float]:
+    """Shoot ``amount`` ((3,) [W m-2]) from ``patch`` through its form-factor column, sum
+    the spread of the patches that changed again, and return :func:`unshot_totals`
+    after the shot. One compiled loop when available (:mod:`raytrad.core.compiled`),
+    which balances the raw column as it goes, else :func:`numpy_step`, the reference it
+    is tested against. ``loops``:
+    :func:`raytrad.core.compiled.solver_loops` to shoot with (found here when None; the
+    solve finds them once)."""
     if state.radiosity.shape != state.irradiance.shape:  # a state :func:`solve` did not set
         state.radiosity = problem.receiver_radiosity(state.irradiance)
+    if state.spread.shape != state.shot.shape or state.peak.shape != state.shot.shape:
+        state.spread, state.peak = problem.spread(state.radiosity, state.entry_shot, state.unshot)
     if loops is None:
         fast = compiled.get()
         if fast is None:
-            numpy_shoot(problem, state, engine, patch, amount)
-            return
+            return numpy_step(problem, state, engine, patch, amount)
         loops = compiled.solver_loops(fast, worker_count())
     column = engine.raw_column(patch)
     scales = engine.column_scales(patch)
@@ -75,16 +69,20 @@ def shoot(
     gather = column.gather
     means = problem.subarea_means
     plan, known = problem.plans.get(engine, patch, len(gather.receivers), scales)
-    power, reflected, capture, *found = loops.shoot(
-        problem.patch_entries[problem.patch_ptr[patch] : problem.patch_ptr[patch + 1]],
-        problem.entry_receiver,
+    absolute, magnitude, *found = loops.shoot(
+        patch,
+        np.ascontiguousarray(amount, dtype=np.float64),
+        problem.patch_entries,
+        problem.patch_ptr,
+        problem.patch_receiver,
+        problem.patch_weight,
+        problem.receiver_ptr,
+        problem.entry_patch,
         problem.entry_weight,
         problem.receiver_emission,
         problem.receiver_reflectance,
-        state.irradiance,
-        state.radiosity,
-        state.entry_shot,
-        np.ascontiguousarray(amount, dtype=np.float64),
+        problem.receiver_area,
+        problem.patch_area,
         column.receivers,
         column.factors,
         _UNSCALED if row_scale is None else row_scale,
@@ -93,17 +91,23 @@ def shoot(
         gather.pointer,
         gather.sources,
         gather.weights,
-        problem.receiver_area,
-        problem.receiver_ptr,
-        problem.entry_patch,
-        state.patch_radiosity,
-        problem.scratch,
         problem.patch_nodes[patch],
         problem.patch_nodes[patch + 1],
         means.pointer,
         means.receivers,
         means.shares,
         means.base,
+        state.irradiance,
+        state.radiosity,
+        state.entry_shot,
+        state.patch_radiosity,
+        state.shot,
+        state.absorbed,
+        state.escaped,
+        state.captured,
+        state.spread,
+        state.peak,
+        problem.scratch,
         problem.touched,
         problem.held,
         problem.far_held,
@@ -112,17 +116,30 @@ def shoot(
     )
     if not known:
         problem.plans.keep(patch, (*plan[:2], *found), scales)
-    problem.touched[patch] = True  # its receivers' shots and its own shot changed
-    area_p = problem.patch_area[patch]
-    state.shot[patch] += amount
-    state.absorbed += power - reflected
-    state.escaped += area_p * amount - power
-    state.captured[patch] = capture / area_p
     state.shots += 1
+    return float(absolute), float(magnitude)
 
 
 #: The compiled shot's row scales before balancing (none).
 _UNSCALED = np.zeros(0)
+
+
+def numpy_step(
+    problem: DiscreteSystem,
+    state: SolverState,
+    engine: FormFactorEngine,
+    patch: int,
+    amount: np.ndarray,
+    loops: Any = None,
+) -> tuple[float, float]:
+    """:func:`shoot` in numpy, its reference: :func:`numpy_shoot`, the spread summed
+    again (:meth:`DiscreteSystem.respread`) and :func:`unshot_totals`. Called as
+    :func:`shoot` is; ``loops`` is not used."""
+    numpy_shoot(problem, state, engine, patch, amount)
+    state.spread, state.peak = problem.respread(
+        state.spread, state.peak, state.radiosity, state.entry_shot, state.unshot
+    )
+    return unshot_totals(problem, state)
 
 
 def numpy_shoot(

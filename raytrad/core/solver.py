@@ -37,6 +37,7 @@ stop on the remaining unshot power relative to the emitted power.
 from __future__ import annotations
 
 import logging
+import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -48,8 +49,8 @@ from raytrad.core import compiled, patch_factors
 from raytrad.core.formfactor import FormFactorEngine
 from raytrad.core.mesh import RadiosityMesh
 from raytrad.core.patch_factors import PatchFactors
-from raytrad.core.shot import respread
 from raytrad.core.shot import shoot as _shoot
+from raytrad.core.shot import unshot_totals
 from raytrad.core.solver_state import SolverState
 from raytrad.core.system import DiscreteSystem
 from raytrad.core.visibility import worker_count
@@ -373,11 +374,9 @@ def solve(
         if top <= 0:
             reason = "converged"
             break
-        _shoot(problem, state, engine, patch, amount, loops)
-        respread(problem, state, fast, loops)
+        totals = _shoot(problem, state, engine, patch, amount, loops)
         state.rays = rays_before + engine.rays_cast
         state.seconds = time.perf_counter() - start
-        totals = unshot_totals(problem, state, fast)
         _guard_growth(state, totals[0], settings)
         _check_divergence(state, totals[0], emitted_total)
         if progress is not None:
@@ -469,22 +468,6 @@ def _numpy_choice(
     return patch, float(magnitude[patch]), amount[patch]
 
 
-def unshot_totals(
-    problem: DiscreteSystem, state: SolverState, fast: Any = None
-) -> tuple[float, float]:
-    """``sum_p A_p |dB_p|`` and ``sum_p A_p (|dB_p| + spread_p)``, each summed over the
-    channels [W]: the unshot power the divergence guards watch, and the residual's
-    numerator. ``fast``: the compiled kernels (:func:`raytrad.core.compiled.get`), or
-    None for numpy (the reference)."""
-    if fast is not None:
-        absolute, magnitude = fast.unshot_totals(
-            state.patch_radiosity, state.shot, state.spread, problem.patch_area
-        )
-        return float(absolute), float(magnitude)
-    area = problem.patch_area
-    return float((area @ np.abs(state.unshot)).sum()), float((area @ state.unshot_magnitude).sum())
-
-
 #: Unshot power beyond this multiple of the emitted power means divergence: overshooting
 #: legitimately leaves unshot power of order rho / (1 - rho) times the emitted power.
 DIVERGENCE_LIMIT = 1e9
@@ -497,7 +480,7 @@ def _check_divergence(state: SolverState, total: float, emitted_total: float) ->
     surfaces returns more than it receives (reflectance times form-factor sum >= 1).
     ``total`` is the unshot power ``sum_p A_p |dB_p|`` summed over channels [W].
     """
-    if not np.isfinite(total) or total > DIVERGENCE_LIMIT * emitted_total:
+    if not math.isfinite(total) or total > DIVERGENCE_LIMIT * emitted_total:
         raise SolverError(
             f"the solve diverged after {state.shots} shots: the unshot power grew to "
             f"{total / emitted_total:.3g} times the emitted power; the scene reflects more "

@@ -341,7 +341,7 @@ def test_a_parallel_copy_is_compiled_and_cached_apart() -> None:
     """Each solver loop's ``parallel=True`` copy is a dispatcher of its own, named apart
     (numba keys its cache by name: the copy must not load the original's code)."""
     fast = compiled.get()
-    for name in ("shoot", "spread_touched"):
+    for name in ("shoot",):
         serial, parallel = getattr(fast, name), getattr(fast, f"{name}_parallel")
         assert parallel.targetoptions.get("parallel") and not serial.targetoptions.get("parallel")
         assert parallel.py_func.__qualname__ == f"{name}_parallel"

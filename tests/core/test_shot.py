@@ -19,21 +19,16 @@ def _solve(prepared: Prepared, **settings: object) -> SolveResult:
     return solve(prepared.mesh, prepared.engine, SolveSettings(**settings))  # type: ignore[arg-type]
 
 
-def _numpy_shot(*arguments: object) -> None:
-    """:func:`shot.numpy_shoot` called as the solve calls its shot (the loops last)."""
-    shot.numpy_shoot(*arguments[:5])  # type: ignore[arg-type]
-
-
 @pytest.mark.skipif(compiled.get() is None, reason="numba is not installed")
 @pytest.mark.parametrize("method", METHODS)
 def test_compiled_shot_agrees_with_numpy_shot(
     cornell: Prepared, method: str, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    """The compiled shot (one loop per column) against :func:`numpy_shoot`, its reference:
+    """The compiled shot (one loop per column) against :func:`numpy_step`, its reference:
     the same shots, radiosity and energy ledger to rounding, near-field gathers included."""
     settings = SolveSettings(method=method, max_shots=300, tolerance=1e-9)
     fast = solve(cornell.mesh, cornell.engine, settings)
-    monkeypatch.setattr(solver, "_shoot", _numpy_shot)
+    monkeypatch.setattr(solver, "_shoot", shot.numpy_step)
     slow = solve(cornell.mesh, cornell.engine, settings)
     assert any(len(g.receivers) for _, _, g in cornell.engine.near_field())
     assert fast.state.shots == slow.state.shots == 300
@@ -54,10 +49,7 @@ def test_the_parallel_shot_solves_as_the_serial_one_to_the_bit(
     fast = compiled.get()
     results = []
     for suffix in ("", "_parallel"):
-        loops = SimpleNamespace(
-            shoot=getattr(fast, "shoot" + suffix),
-            spread_touched=getattr(fast, "spread_touched" + suffix),
-        )
+        loops = SimpleNamespace(shoot=getattr(fast, "shoot" + suffix))
         monkeypatch.setattr(compiled, "solver_loops", lambda kernels, wanted, chosen=loops: chosen)
         results.append(_solve(cornell, tolerance=1e-4))
     serial, parallel = results
@@ -123,3 +115,27 @@ def test_shot_plans_are_kept_for_one_engine_and_its_scales_within_their_bytes(
     monkeypatch.setattr(system, "PLAN_BYTES", 100)
     plans.keep(3, found, (rows, 0.5))
     assert not plans.get(engine, 3, 2, (rows, 0.5))[1] and plans.bytes == 0
+
+
+@pytest.mark.skipif(compiled.get() is None, reason="numba is not installed")
+@pytest.mark.parametrize("bytes_for_plans", [0, system.PLAN_BYTES])
+def test_the_spread_a_shot_leaves_is_the_whole_spread_to_the_bit(
+    cornell: Prepared, monkeypatch: pytest.MonkeyPatch, bytes_for_plans: int
+) -> None:
+    """The compiled shot sums again only the patches it changed (those of its near
+    receivers, those its plan names, the shooter): after many shots, with plans and
+    without, the state's spread and peak are :meth:`DiscreteSystem.spread` of the whole
+    state to the bit, and its totals are :func:`shot.unshot_totals`' of it."""
+    monkeypatch.setattr(system, "PLAN_BYTES", bytes_for_plans)
+    problem = system.DiscreteSystem.from_mesh(cornell.mesh, cornell.engine.subarea_means)
+    state = solver.new_state(cornell.mesh, problem)
+    fast = compiled.get()
+    rng = np.random.default_rng(4)
+    for patch in rng.integers(0, cornell.mesh.patch_count, 200):
+        amount = rng.uniform(-0.2, 1.0, 3) * (1.0 + state.unshot[patch])
+        totals = shot.shoot(problem, state, cornell.engine, int(patch), amount)
+    whole = problem.spread(state.radiosity, state.entry_shot, state.unshot)
+    np.testing.assert_array_equal(state.spread, whole[0])
+    np.testing.assert_array_equal(state.peak, whole[1])
+    assert totals == shot.unshot_totals(problem, state, fast)
+    assert state.shots == 200 and not problem.touched.any()

@@ -305,14 +305,10 @@ def test_compiled_ambient_choice_agrees_with_numpy(
 def test_compiled_choice_solves_as_numpy_choice(
     cornell: Prepared, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    """A default solve with the compiled choice and totals against the numpy ones: the same
-    shots and the same radiosity to rounding."""
+    """A default solve with the compiled choice against the numpy one: the same shots and
+    the same radiosity to rounding."""
     fast = _solve(cornell, tolerance=1e-4)
     monkeypatch.setattr(solver, "_compiled_choice", lambda method, kernels: None)
-    numpy_totals = solver.unshot_totals
-    monkeypatch.setattr(
-        solver, "unshot_totals", lambda problem, state, kernels=None: numpy_totals(problem, state)
-    )
     slow = _solve(cornell, tolerance=1e-4)
     assert fast.state.shots == slow.state.shots > 100
     scale = np.abs(slow.radiosity).max()

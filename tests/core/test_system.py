@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from raytrad.core import compiled
+from raytrad.core import _compiled_solver, compiled
 from raytrad.core.mesh import MeshSettings, build_mesh
 from raytrad.core.system import DiscreteSystem, patch_average_matrix
 from raytrad.scene.builtin import cornell_box
@@ -88,38 +88,24 @@ def test_respread_sums_the_touched_patches_again_to_the_bit(
 
 
 @pytest.mark.skipif(compiled.get() is None, reason="numba is not installed")
-def test_spread_touched_is_respread_in_place(system: DiscreteSystem) -> None:
-    """The solver's in-place step (:func:`raytrad.core.shot.respread`, compiled) gives
-    :meth:`DiscreteSystem.respread`'s spread and peak to the bit, the unshot radiosity
-    taken from the patch radiosity and what each patch has shot, and clears the marks."""
+@pytest.mark.parametrize("share", [0.0, 0.05, 0.4, 1.0])
+def test_touched_runs_take_every_marked_patch_once_in_runs_of_like_entries(
+    system: DiscreteSystem, share: float
+) -> None:
+    """The compiled shot's spread takes the marked patches ascending, each once, in
+    ``SPREAD_PARTS`` runs whose entries differ from an equal share by at most one patch's,
+    and clears the marks."""
     fast = compiled.get()
-    rng = np.random.default_rng(2)
-    count, patches = len(system.receiver_area), len(system.patch_area)
-    radiosity = system.receiver_radiosity(rng.uniform(0, 2, (count, 3)))
-    entry_shot = rng.uniform(0, 1, (len(system.entry_patch), 3))
-    patch_radiosity = rng.uniform(0, 2, (patches, 3))
-    shot = rng.uniform(0, 2, (patches, 3))
-    spread, peak = system.spread(radiosity, entry_shot, patch_radiosity - shot)
-    touched = rng.random(patches) < 0.4
-    radiosity = radiosity + 0.3
-    patch_radiosity = patch_radiosity + 0.1
+    touched = np.random.default_rng(3).random(len(system.patch_area)) < share
     system.touched[:] = touched
-    want = system.respread(spread, peak, radiosity, entry_shot, patch_radiosity - shot)
-    got = spread.copy(), peak.copy()
-    system.touched[:] = touched
-    fast.spread_touched(
-        system.touched,
-        system.patch_entries,
-        system.patch_ptr,
-        system.patch_receiver,
-        system.patch_weight,
-        radiosity,
-        entry_shot,
-        patch_radiosity,
-        shot,
-        *got,
-    )
-    for a, b, before in zip(got, want, (spread, peak), strict=True):
-        np.testing.assert_array_equal(a, b)
-        assert (a[touched] != before[touched]).any(axis=1).all()
+    rows, ends = fast._touched_runs(system.touched, system.patch_ptr)
+    np.testing.assert_array_equal(rows, np.flatnonzero(touched))
     assert not system.touched.any()
+    parts = _compiled_solver.SPREAD_PARTS
+    assert ends[0] == 0 and ends[-1] == len(rows) and len(ends) == parts + 1
+    assert (np.diff(ends) >= 0).all()
+    sizes = np.diff(system.patch_ptr)[rows]
+    per_run = np.add.reduceat(np.append(sizes, 0), ends[:-1])[:parts] * (np.diff(ends) > 0)
+    assert per_run.sum() == sizes.sum()
+    if len(rows):
+        assert np.abs(per_run - sizes.sum() / parts).max() <= sizes.max()
