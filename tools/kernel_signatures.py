@@ -51,8 +51,8 @@ from raytrad.cli import main
 with tempfile.TemporaryDirectory() as out:
     if main(sys.argv[1:] + ["-o", out]):
         sys.exit("the render failed")
-from raytrad.core import _compiled_solver
-for name in _compiled_solver.PARALLEL:  # one of each pair runs, by the cores: list both
+from raytrad.core import _compiled_solver, _compiled_spread
+for name in _compiled_solver.PARALLEL + _compiled_spread.PARALLEL:  # one of each pair runs
     both = seen[name] | seen[name + "_parallel"]
     seen[name], seen[name + "_parallel"] = set(both), set(both)
 found = {k: sorted([repr(t) for t in s] for s in v) for k, v in sorted(seen.items()) if v}

@@ -1,6 +1,7 @@
 """The solve's and balancing's loops behind :mod:`raytrad.core.compiled`, written for numba
-(imported only there): a shot through a cached column, the solver's per-patch spread and
-average, balancing's Sinkhorn scaling. Plain Python as written here;
+(imported only there): a shot through a cached column (with the spread it changes,
+:mod:`raytrad.core._compiled_spread`), the solver's patch average, balancing's Sinkhorn
+scaling. Plain Python as written here;
 :func:`raytrad.core.compiled.get` compiles every function in :data:`KERNELS`. Each
 computes what its numpy reference computes (:mod:`raytrad.core.solver`,
 :mod:`raytrad.core.balance`, :mod:`raytrad.core.system`); see there for shapes and units.
@@ -9,6 +10,8 @@ computes what its numpy reference computes (:mod:`raytrad.core.solver`,
 # mypy: ignore-errors
 
 import numpy as np
+
+from raytrad.core import _compiled_spread as _s
 
 #: ``numba.prange`` once :mod:`raytrad.core.compiled` compiles these loops (``range`` as
 #: plain Python): its loops run on several threads in a kernel's :data:`PARALLEL` copy and
@@ -19,18 +22,10 @@ prange = range
 #: (:func:`raytrad.core.compiled.solver_loops` chooses).
 PARALLEL = ("shoot",)
 
-#: Runs of about equal entries :func:`_touched_runs` splits the touched patches into.
-SPREAD_PARTS = 16
-
 #: Every function to compile, each after the helpers it calls.
 KERNELS = (
     "_factor",
     "_first_at_least",
-    "_spread_row",
-    "patch_spread_rows",
-    "_touched_runs",
-    "unshot_totals",
-    "ambient_choice",
     "patch_average",
     "_near_rows",
     "_subarea_shots",
@@ -40,160 +35,6 @@ KERNELS = (
     "column_sweep",
     "column_final",
 )
-
-
-def _spread_row(
-    p,
-    u0,
-    u1,
-    u2,
-    patch_entries,
-    patch_ptr,
-    patch_receiver,
-    patch_weight,
-    radiosity,
-    entry_shot,
-    spread,
-    peak,
-):
-    """Patch ``p``'s ``sum_k W_pk |dB_pk - dB_p|`` and ``max_k |dB_pk|`` into row ``p`` of
-    ``spread`` and ``peak``, its unshot radiosity ``dB_p`` being (u0, u1, u2): its entries
-    (``patch_entries[patch_ptr[p]:patch_ptr[p + 1]]``, ascending; their receivers and
-    weights ``patch_receiver`` and ``patch_weight`` in the same order) summed from zero in
-    that order."""
-    s0 = s1 = s2 = m0 = m1 = m2 = 0.0
-    for q in range(patch_ptr[p], patch_ptr[p + 1]):
-        e = patch_entries[q]
-        k = patch_receiver[q]
-        w = patch_weight[q]
-        own0 = radiosity[k, 0] - entry_shot[e, 0]
-        own1 = radiosity[k, 1] - entry_shot[e, 1]
-        own2 = radiosity[k, 2] - entry_shot[e, 2]
-        s0 += w * abs(own0 - u0)
-        s1 += w * abs(own1 - u1)
-        s2 += w * abs(own2 - u2)
-        m0 = max(m0, abs(own0))
-        m1 = max(m1, abs(own1))
-        m2 = max(m2, abs(own2))
-    spread[p, 0], spread[p, 1], spread[p, 2] = s0, s1, s2
-    peak[p, 0], peak[p, 1], peak[p, 2] = m0, m1, m2
-
-
-def patch_spread_rows(
-    rows,
-    patch_entries,
-    patch_ptr,
-    patch_receiver,
-    patch_weight,
-    radiosity,
-    entry_shot,
-    unshot,
-    spread,
-    peak,
-):
-    """Per patch of ``rows`` ``sum_k W_pk |dB_pk - dB_p|`` and ``max_k |dB_pk|`` (see
-    :meth:`raytrad.core.system.DiscreteSystem.numpy_spread`), into ``spread`` and ``peak``
-    (P, 3) in place, each patch by :func:`_spread_row`, so a patch's sums do not depend on
-    which other patches are summed with it."""
-    for i in range(len(rows)):
-        p = rows[i]
-        _spread_row(
-            p,
-            unshot[p, 0],
-            unshot[p, 1],
-            unshot[p, 2],
-            patch_entries,
-            patch_ptr,
-            patch_receiver,
-            patch_weight,
-            radiosity,
-            entry_shot,
-            spread,
-            peak,
-        )
-
-
-def _touched_runs(touched, patch_ptr):
-    """The patches marked in ``touched`` ((P,) bool), whose marks it clears, ascending
-    ((M,) int64), and the ends of :data:`SPREAD_PARTS` runs of them of about equal entries
-    ((SPREAD_PARTS + 1,) int64), so that the threads summing their spreads share the
-    work whichever patches a shot touched."""
-    rows = np.empty(len(touched), dtype=np.int64)
-    count = 0
-    total = 0
-    for p in range(len(touched)):
-        if touched[p]:
-            touched[p] = False
-            rows[count] = p
-            count += 1
-            total += patch_ptr[p + 1] - patch_ptr[p]
-    parts = SPREAD_PARTS
-    ends = np.full(parts + 1, count, dtype=np.int64)
-    ends[0] = 0
-    summed = 0
-    part = 1
-    for i in range(count):
-        summed += patch_ptr[rows[i] + 1] - patch_ptr[rows[i]]
-        while part < parts and summed * parts >= total * part:
-            ends[part] = i + 1
-            part += 1
-    return rows[:count], ends
-
-
-def unshot_totals(patch_radiosity, shot, spread, area):
-    """``sum_p A_p |dB_p|`` and ``sum_p A_p (|dB_p| + spread_p)``, each over the three
-    channels [W] (see :func:`raytrad.core.solver.unshot_totals`)."""
-    absolute = magnitude = 0.0
-    for p in range(len(area)):
-        a = area[p]
-        for c in range(3):
-            u = abs(patch_radiosity[p, c] - shot[p, c])
-            absolute += a * u
-            magnitude += a * (u + spread[p, c])
-    return absolute, magnitude
-
-
-def ambient_choice(patch_radiosity, shot, spread, area, reflectance, captured, gain, amount):
-    """Ambient overshooting's shooter (see :func:`raytrad.core.solver._ambient_amount`
-    and the selection in :func:`raytrad.core.solver.solve`): the first patch of largest
-    ``A_p sum_c (|amount_pc| + spread_pc)`` and that value; its amount ((3,) [W m-2])
-    into ``amount``. A NaN value is chosen first, as ``np.argmax`` would."""
-    count = len(area)
-    total_area = known_area = known_capture = 0.0
-    for p in range(count):
-        total_area += area[p]
-        if captured[p] == captured[p]:  # not NaN: the patch has shot
-            known_area += area[p]
-            known_capture += captured[p] * area[p]
-    mean_capture = known_capture / known_area if known_area > 0.0 else 1.0
-    power = np.zeros(3)
-    lost = np.zeros(3)
-    for p in range(count):
-        a = area[p]
-        capture = captured[p] if captured[p] == captured[p] else mean_capture
-        for c in range(3):
-            power[c] += a * (patch_radiosity[p, c] - shot[p, c])
-            lost[c] += a * (1.0 - reflectance[p, c] * capture)
-    ambient = np.empty(3)
-    floor = 1e-300 * total_area
-    for c in range(3):
-        ambient[c] = max(power[c] / max(lost[c], floor), 0.0) * gain  # formula 3
-    best = -1
-    top = 0.0
-    for p in range(count):
-        chosen = 0.0
-        for c in range(3):
-            cap = max(power[c], 0.0) / area[p]
-            value = min(patch_radiosity[p, c] - shot[p, c] + reflectance[p, c] * ambient[c], cap)
-            chosen += abs(value) + spread[p, c]
-        magnitude = area[p] * chosen
-        if best < 0 or magnitude > top or (magnitude != magnitude and top == top):
-            best, top = p, magnitude
-    for c in range(3):
-        cap = max(power[c], 0.0) / area[best]
-        u = patch_radiosity[best, c] - shot[best, c]
-        amount[c] = min(u + reflectance[best, c] * ambient[c], cap)  # formulas 4 and 5
-    return best, top
 
 
 def patch_average(receivers, values, receiver_ptr, entry_patch, entry_weight, patch_count):
@@ -346,13 +187,17 @@ def shoot(
     plan_patches,
     plan_values,
     known,
+    drift,
+    lazy,
 ):
     """Shoot ``amount`` ((3,) [W m-2]) from ``patch`` through its cached column, in place,
     and bring the state's spread up to date after it (see
     :func:`raytrad.core.shot.numpy_shoot`, the reference, for the steps, and
-    :meth:`raytrad.core.system.DiscreteSystem.respread`). Returns the unshot power
-    ``sum_p A_p |dB_p|`` and ``sum_p A_p (|dB_p| + spread_p)`` after the shot [W]
-    (:func:`unshot_totals`), and the column's far patches and sums (below).
+    :meth:`raytrad.core.system.DiscreteSystem.respread`). Returns the unshot totals after
+    the shot (``_compiled_spread.unshot_totals``: the unshot power, the residual's
+    numerator and the stored spreads' drift [W]), and the column's far patches and sums
+    (below). With ``lazy`` the patches only its far receivers change are not summed
+    again: their drift (``drift`` (P, 3)) grows instead (``_compiled_spread.add_drift``).
 
     The arguments are the system's (:class:`raytrad.core.system.DiscreteSystem`), the
     column's (its receivers, raw factors and balancing scales: its factors are
@@ -580,12 +425,18 @@ def shoot(
     reflected[0] += c0 * sums[2]
     reflected[1] += c1 * sums[3]
     reflected[2] += c2 * sums[4]
+    change = np.empty(3)
     for i in range(len(plan_patches)):
         p = plan_patches[i]
-        touched[p] = True
-        patch_radiosity[p, 0] += c0 * plan_values[i, 0]
-        patch_radiosity[p, 1] += c1 * plan_values[i, 1]
-        patch_radiosity[p, 2] += c2 * plan_values[i, 2]
+        change[0], change[1] = c0 * plan_values[i, 0], c1 * plan_values[i, 1]
+        change[2] = c2 * plan_values[i, 2]
+        patch_radiosity[p, 0] += change[0]
+        patch_radiosity[p, 1] += change[1]
+        patch_radiosity[p, 2] += change[2]
+        if lazy and not touched[p] and p != patch:  # the near receivers' are summed again
+            _s.add_drift(p, change, patch_radiosity, shot, spread, peak, drift)
+        else:
+            touched[p] = True
     area_p = patch_area[patch]
     for c in range(3):
         shot[patch, c] += amount[c]
@@ -593,11 +444,11 @@ def shoot(
         escaped[c] += area_p * amount[c] - power[c]
     captured[patch] = (sums[0] + sums[1]) / area_p
     touched[patch] = True  # its receivers' shots and its own shot changed
-    rows, ends = _touched_runs(touched, patch_ptr)
-    for run in prange(SPREAD_PARTS):  # rows apart: the same sums on any number of threads
+    rows, ends = _s._touched_runs(touched, patch_ptr)
+    for run in prange(_s.SPREAD_PARTS):  # rows apart: the same sums on any number of threads
         for i in range(ends[run], ends[run + 1]):
             p = rows[i]
-            _spread_row(
+            _s._spread_row(
                 p,
                 patch_radiosity[p, 0] - shot[p, 0],
                 patch_radiosity[p, 1] - shot[p, 1],
@@ -611,8 +462,9 @@ def shoot(
                 spread,
                 peak,
             )
-    absolute, magnitude = unshot_totals(patch_radiosity, shot, spread, patch_area)
-    return absolute, magnitude, plan_patches, plan_values
+            drift[p, 0] = drift[p, 1] = drift[p, 2] = 0.0
+    absolute, magnitude, width = _s.unshot_totals(patch_radiosity, shot, spread, patch_area, drift)
+    return absolute, magnitude, width, plan_patches, plan_values
 
 
 def column_sweep(rows, values, receiver_area, row_scale, patch_area, closed, limit, row_sum):

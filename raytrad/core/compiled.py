@@ -94,6 +94,7 @@ def _dispatchers(numba: Any) -> dict[str, Any]:
         _compiled_segments,
         _compiled_shafts,
         _compiled_solver,
+        _compiled_spread,
     )
 
     modules = (
@@ -101,6 +102,7 @@ def _dispatchers(numba: Any) -> dict[str, Any]:
         _compiled_near,
         _compiled_gather,
         _compiled_shafts,
+        _compiled_spread,
         _compiled_solver,
         _compiled_segments,
         _compiled_rays,
@@ -166,12 +168,17 @@ def _renamed(function: Any, name: str) -> Any:
     return copy
 
 
+#: The solver's loops compiled twice (:func:`solver_loops`): the shot, the choice of the
+#: next shooter, and the spreads summed again before the solve stops or is read.
+SOLVER_LOOPS = ("shoot", "ambient_choice", "refresh_stale")
+
+
 def solver_loops(fast: SimpleNamespace, wanted: int) -> SimpleNamespace:
-    """The solver's loop of the compiled kernels ``fast`` (``shoot``, the shot and the
-    spread after it) to call from this thread: its ``parallel=True`` copy when
-    :func:`solver_threads` of ``wanted`` threads is above 1, numba's threads set to that
-    in this thread, else the loop itself. Both give the same results to the bit (their
-    blocks and rows are summed apart and added in order)."""
+    """The solver's loops of the compiled kernels ``fast`` (:data:`SOLVER_LOOPS`) to call
+    from this thread: their ``parallel=True`` copies when :func:`solver_threads` of
+    ``wanted`` threads is above 1, numba's threads set to that in this thread, else the
+    loops themselves. Both give the same results to the bit (their blocks and rows are
+    summed apart and added in order)."""
     threads = solver_threads(wanted)
     parallel = threads > 1 and hasattr(fast, "shoot_parallel")
     if parallel and getattr(_THREAD, "threads", 0) != threads:
@@ -183,7 +190,7 @@ def solver_loops(fast: SimpleNamespace, wanted: int) -> SimpleNamespace:
     loops = _STATE.get("solver_loops")
     if loops is None or loops[0] != key:
         suffix = "_parallel" if parallel else ""
-        chosen = SimpleNamespace(shoot=getattr(fast, "shoot" + suffix))
+        chosen = SimpleNamespace(**{name: getattr(fast, name + suffix) for name in SOLVER_LOOPS})
         loops = _STATE["solver_loops"] = (key, chosen)
     return loops[1]
 

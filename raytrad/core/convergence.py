@@ -296,6 +296,7 @@ class ConvergenceMonitor:
 
     def record(self, state: SolverState) -> None:
         """Add one row for the current state."""
+        state.settled()  # its spreads summed again where a shot left them to drift
         m = self.mesh
         unshot_power = float((m.patch_area @ state.unshot_magnitude).sum())
         residual = unshot_power / self._emitted if self._emitted > 0 else 0.0

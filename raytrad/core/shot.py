@@ -25,18 +25,26 @@ from raytrad.core.visibility import worker_count
 
 def unshot_totals(
     problem: DiscreteSystem, state: SolverState, fast: Any = None
-) -> tuple[float, float]:
-    """``sum_p A_p |dB_p|`` and ``sum_p A_p (|dB_p| + spread_p)``, each summed over the
-    channels [W]: the unshot power the divergence guards watch, and the residual's
-    numerator. ``fast``: the compiled kernels (:func:`raytrad.core.compiled.get`), or
-    None for numpy (the reference)."""
+) -> tuple[float, float, float]:
+    """``sum_p A_p |dB_p|``, ``sum_p A_p (|dB_p| + spread_p)`` and ``sum_p A_p d_p``,
+    each summed over the channels [W]: the unshot power the divergence guards watch, the
+    residual's numerator, and how far that may be off while some patches' spreads have
+    drifted by ``d_p`` (``DiscreteSystem.spread_drift``, see
+    :mod:`raytrad.core._compiled_spread`). ``fast``: the compiled kernels
+    (:func:`raytrad.core.compiled.get`), or None for numpy (the reference, whose spreads
+    never drift)."""
     if fast is not None:
-        absolute, magnitude = fast.unshot_totals(
-            state.patch_radiosity, state.shot, state.spread, problem.patch_area
+        absolute, magnitude, width = fast.unshot_totals(
+            state.patch_radiosity,
+            state.shot,
+            state.spread,
+            problem.patch_area,
+            problem.spread_drift,
         )
-        return float(absolute), float(magnitude)
+        return float(absolute), float(magnitude), float(width)
     area = problem.patch_area
-    return float((area @ np.abs(state.unshot)).sum()), float((area @ state.unshot_magnitude).sum())
+    absolute = float((area @ np.abs(state.unshot)).sum())
+    return absolute, float((area @ state.unshot_magnitude).sum()), 0.0
 
 
 def shoot(
@@ -46,12 +54,15 @@ def shoot(
     patch: int,
     amount: np.ndarray,
     loops: Any = None,
-) -> tuple[float, float]:
+    lazy: bool = False,
+) -> tuple[float, float, float]:
     """Shoot ``amount`` ((3,) [W m-2]) from ``patch`` through its form-factor column, sum
     the spread of the patches that changed again, and return :func:`unshot_totals`
-    after the shot. One compiled loop when available (:mod:`raytrad.core.compiled`),
-    which balances the raw column as it goes, else :func:`numpy_step`, the reference it
-    is tested against. ``loops``:
+    after the shot. One compiled loop when available (:mod:`raytrad.core.compiled`), which
+    balances the raw column as it goes, else :func:`numpy_step`, the reference it is
+    tested against. ``lazy`` (compiled only): the patches only the column's far
+    receivers changed get a drift instead (see :mod:`raytrad.core._compiled_spread`);
+    the solve's choice sums them again where it matters. ``loops``:
     :func:`raytrad.core.compiled.solver_loops` to shoot with (found here when None; the
     solve finds them once)."""
     if state.radiosity.shape != state.irradiance.shape:  # a state :func:`solve` did not set
@@ -69,7 +80,7 @@ def shoot(
     gather = column.gather
     means = problem.subarea_means
     plan, known = problem.plans.get(engine, patch, len(gather.receivers), scales)
-    absolute, magnitude, *found = loops.shoot(
+    absolute, magnitude, width, *found = loops.shoot(
         patch,
         np.ascontiguousarray(amount, dtype=np.float64),
         problem.patch_entries,
@@ -113,11 +124,13 @@ def shoot(
         problem.far_held,
         *plan,
         known,
+        problem.spread_drift,
+        lazy,
     )
     if not known:
         problem.plans.keep(patch, (*plan[:2], *found), scales)
     state.shots += 1
-    return float(absolute), float(magnitude)
+    return float(absolute), float(magnitude), float(width)
 
 
 #: The compiled shot's row scales before balancing (none).
@@ -131,10 +144,11 @@ def numpy_step(
     patch: int,
     amount: np.ndarray,
     loops: Any = None,
-) -> tuple[float, float]:
+    lazy: bool = False,
+) -> tuple[float, float, float]:
     """:func:`shoot` in numpy, its reference: :func:`numpy_shoot`, the spread summed
     again (:meth:`DiscreteSystem.respread`) and :func:`unshot_totals`. Called as
-    :func:`shoot` is; ``loops`` is not used."""
+    :func:`shoot` is; ``loops`` and ``lazy`` are not used."""
     numpy_shoot(problem, state, engine, patch, amount)
     state.spread, state.peak = problem.respread(
         state.spread, state.peak, state.radiosity, state.entry_shot, state.unshot

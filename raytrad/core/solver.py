@@ -321,7 +321,9 @@ def solve(
         A state to resume from (as saved by :mod:`raytrad.outputs.resume`); None starts
         afresh.
     progress : callable or None
-        Called as ``progress(state, residual)`` after each shot.
+        Called as ``progress(state, residual)`` after each shot: the residual before it,
+        or a bound above that while some spreads drift (the compiled ambient solve, see
+        :mod:`raytrad.core._compiled_spread`; ``state.settled()`` makes them exact).
     stop : callable or None
         Polled before each shot; True ends the solve with reason ``interrupted`` and a
         consistent state (the CLI sets it on Ctrl-C, so the run can be resumed).
@@ -357,10 +359,19 @@ def solve(
     direct = False
     fast = compiled.get()
     loops = None if fast is None else compiled.solver_loops(fast, worker_count())
-    choose = _compiled_choice(settings.method, fast)
+    choose = _compiled_choice(settings.method, loops)
+    lazy = choose is not None and LAZY_SPREAD
+    if lazy:
+
+        def settle() -> None:
+            _settle(problem, state, loops)
+
+        state.settle = settle
     totals = unshot_totals(problem, state, fast)
     while not reason:
-        residual = totals[1] / emitted_total
+        if totals[2] and (totals[1] - totals[2]) / emitted_total <= settings.tolerance:
+            totals = _settle(problem, state, loops)  # the stop as with every spread exact
+        residual = (totals[1] + totals[2]) / emitted_total  # the residual, or above it
         direct = direct or bool((state.shot[emitters] != 0).any(axis=1).all())
         reason = _stop_reason(state, settings, residual, time.perf_counter() - start, direct)
         if not reason and stop is not None and stop():
@@ -374,13 +385,15 @@ def solve(
         if top <= 0:
             reason = "converged"
             break
-        totals = _shoot(problem, state, engine, patch, amount, loops)
+        totals = _shoot(problem, state, engine, patch, amount, loops, lazy)
         state.rays = rays_before + engine.rays_cast
         state.seconds = time.perf_counter() - start
         _guard_growth(state, totals[0], settings)
         _check_divergence(state, totals[0], emitted_total)
         if progress is not None:
             progress(state, residual)
+    state.settled()
+    state.settle = None
     state.seconds = time.perf_counter() - start
     state.rays = rays_before + engine.rays_cast
     residual = (
@@ -422,30 +435,62 @@ def _stop_reason(
 
 
 def _compiled_choice(
-    method: str, fast: Any
+    method: str, loops: Any
 ) -> Callable[[DiscreteSystem, SolverState], tuple[int, float, np.ndarray]] | None:
     """The compiled shooter choice for ``method`` (ambient overshooting's,
-    :func:`raytrad.core.compiled` ``ambient_choice``), called as ``choose(problem,
-    state)`` and returning what :func:`_numpy_choice` (its reference) returns; None: the
-    numpy one then."""
-    if fast is None or method != "ambient":
+    ``ambient_choice`` of ``loops``, :func:`raytrad.core.compiled.solver_loops` or the
+    kernels themselves), called as ``choose(problem, state)`` and returning what
+    :func:`_numpy_choice` (its reference) returns; None: the numpy one then. It sums
+    again the drifted spreads that could change the choice (see
+    :mod:`raytrad.core._compiled_spread`)."""
+    if loops is None or method != "ambient":
         return None
 
     def choose(problem: DiscreteSystem, state: SolverState) -> tuple[int, float, np.ndarray]:
         amount = np.empty(3)
-        patch, top = fast.ambient_choice(
+        patch, top = loops.ambient_choice(
             state.patch_radiosity,
             state.shot,
             state.spread,
+            state.peak,
+            problem.spread_drift,
             problem.patch_area,
             problem.patch_reflectance,
             state.captured,
             state.ambient_gain,
             amount,
+            problem.patch_entries,
+            problem.patch_ptr,
+            problem.patch_receiver,
+            problem.patch_weight,
+            state.radiosity,
+            state.entry_shot,
+            problem.touched,
         )
         return int(patch), float(top), amount
 
     return choose
+
+
+def _settle(problem: DiscreteSystem, state: SolverState, loops: Any) -> tuple[float, float, float]:
+    """Sum again every spread a lazy shot left to drift (``refresh_stale`` of ``loops``);
+    returns :func:`raytrad.core.shot.unshot_totals`, exact now."""
+    absolute, magnitude, width = loops.refresh_stale(
+        problem.touched,
+        problem.patch_entries,
+        problem.patch_ptr,
+        problem.patch_receiver,
+        problem.patch_weight,
+        state.radiosity,
+        state.entry_shot,
+        state.patch_radiosity,
+        state.shot,
+        state.spread,
+        state.peak,
+        problem.spread_drift,
+        problem.patch_area,
+    )
+    return float(absolute), float(magnitude), float(width)
 
 
 def _numpy_choice(
@@ -467,6 +512,11 @@ def _numpy_choice(
     patch = int(np.argmax(magnitude))
     return patch, float(magnitude[patch]), amount[patch]
 
+
+#: Whether the compiled ambient solve lets the spreads of the patches a shot's far
+#: receivers changed drift until they could matter (:mod:`raytrad.core._compiled_spread`);
+#: it chooses and stops the same either way, to the bit.
+LAZY_SPREAD = True
 
 #: Unshot power beyond this multiple of the emitted power means divergence: overshooting
 #: legitimately leaves unshot power of order rho / (1 - rho) times the emitted power.

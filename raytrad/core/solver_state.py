@@ -5,6 +5,7 @@ from the solver (:mod:`raytrad.core.solver`) that changes it and the checkpoints
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -49,6 +50,11 @@ class SolverState:
         ``emission + reflectance * irradiance`` of each receiver [W m-2], kept with the
         irradiance by each shot (so that ``spread`` reads one array, not three). Derived
         like ``spread``.
+    settle : callable or None
+        Set by a solve whose spreads some shots left to drift (the compiled ambient
+        solve, :mod:`raytrad.core._compiled_spread`): sums them again, so that ``spread``
+        and ``peak`` are exact. Whatever reads them during a solve calls :meth:`settled`
+        first; a solve settles them before it returns.
     """
 
     irradiance: np.ndarray
@@ -67,6 +73,13 @@ class SolverState:
     spread: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
     peak: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
     radiosity: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    settle: Callable[[], None] | None = field(default=None, init=False, repr=False, compare=False)
+
+    def settled(self) -> SolverState:
+        """The state with its ``spread`` and ``peak`` exact (see ``settle``)."""
+        if self.settle is not None:
+            self.settle()
+        return self
 
     @property
     def unshot(self) -> np.ndarray:
@@ -76,6 +89,7 @@ class SolverState:
     @property
     def unshot_peak(self) -> np.ndarray:
         """(P, 3) float64 ``max_k |dB_pk|`` (at least ``|unshot|``) [W m-2]."""
+        self.settled()
         peak = self.peak if self.peak.shape == self.shot.shape else 0.0
         return np.asarray(np.maximum(np.abs(self.unshot), peak))
 
@@ -83,6 +97,7 @@ class SolverState:
     def unshot_magnitude(self) -> np.ndarray:
         """(P, 3) float64 ``|unshot| + spread``: at least ``sum_k W_pk |dB_pk|``, what is
         still to shoot whoever sees it [W m-2]."""
+        self.settled()
         spread = self.spread if self.spread.shape == self.shot.shape else 0.0
         return np.asarray(np.abs(self.unshot) + spread)
 

@@ -92,6 +92,7 @@ class DiscreteSystem:
     touched: np.ndarray  # (P,) bool: the patches a shot changed (see respread)
     held: np.ndarray  # (SHOT_BLOCKS, P, 3) zeros, a work array of the compiled shot
     far_held: np.ndarray  # (SHOT_BLOCKS, P, 3) zeros, another
+    spread_drift: np.ndarray  # (P, 3) how far each patch's stored spread may be off [W m-2]
     plans: ShotPlans = field(default_factory=ShotPlans)  # the compiled shot's, per column
 
     @classmethod
@@ -132,6 +133,7 @@ class DiscreteSystem:
             touched=np.zeros(mesh.patch_count, dtype=bool),
             held=np.zeros((SHOT_BLOCKS, mesh.patch_count, 3)),
             far_held=np.zeros((SHOT_BLOCKS, mesh.patch_count, 3)),
+            spread_drift=np.zeros((mesh.patch_count, 3)),
         )
 
     def spread(

@@ -49,7 +49,9 @@ def test_the_parallel_shot_solves_as_the_serial_one_to_the_bit(
     fast = compiled.get()
     results = []
     for suffix in ("", "_parallel"):
-        loops = SimpleNamespace(shoot=getattr(fast, "shoot" + suffix))
+        loops = SimpleNamespace(
+            **{name: getattr(fast, name + suffix) for name in compiled.SOLVER_LOOPS}
+        )
         monkeypatch.setattr(compiled, "solver_loops", lambda kernels, wanted, chosen=loops: chosen)
         results.append(_solve(cornell, tolerance=1e-4))
     serial, parallel = results

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from raytrad.core import _compiled_solver, compiled
+from raytrad.core import compiled
 from raytrad.core.mesh import MeshSettings, build_mesh
 from raytrad.core.system import DiscreteSystem, patch_average_matrix
 from raytrad.scene.builtin import cornell_box
@@ -85,27 +85,3 @@ def test_respread_sums_the_touched_patches_again_to_the_bit(
         assert (got[touched] != before[touched]).any(axis=1).all()
         np.testing.assert_array_equal(got[~touched], before[~touched])
     assert not system.touched.any()
-
-
-@pytest.mark.skipif(compiled.get() is None, reason="numba is not installed")
-@pytest.mark.parametrize("share", [0.0, 0.05, 0.4, 1.0])
-def test_touched_runs_take_every_marked_patch_once_in_runs_of_like_entries(
-    system: DiscreteSystem, share: float
-) -> None:
-    """The compiled shot's spread takes the marked patches ascending, each once, in
-    ``SPREAD_PARTS`` runs whose entries differ from an equal share by at most one patch's,
-    and clears the marks."""
-    fast = compiled.get()
-    touched = np.random.default_rng(3).random(len(system.patch_area)) < share
-    system.touched[:] = touched
-    rows, ends = fast._touched_runs(system.touched, system.patch_ptr)
-    np.testing.assert_array_equal(rows, np.flatnonzero(touched))
-    assert not system.touched.any()
-    parts = _compiled_solver.SPREAD_PARTS
-    assert ends[0] == 0 and ends[-1] == len(rows) and len(ends) == parts + 1
-    assert (np.diff(ends) >= 0).all()
-    sizes = np.diff(system.patch_ptr)[rows]
-    per_run = np.add.reduceat(np.append(sizes, 0), ends[:-1])[:parts] * (np.diff(ends) > 0)
-    assert per_run.sum() == sizes.sum()
-    if len(rows):
-        assert np.abs(per_run - sizes.sum() / parts).max() <= sizes.max()
