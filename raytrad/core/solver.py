@@ -368,32 +368,34 @@ def solve(
 
         state.settle = settle
     totals = unshot_totals(problem, state, fast)
-    while not reason:
-        if totals[2] and (totals[1] - totals[2]) / emitted_total <= settings.tolerance:
-            totals = _settle(problem, state, loops)  # the stop as with every spread exact
-        residual = (totals[1] + totals[2]) / emitted_total  # the residual, or above it
-        direct = direct or bool((state.shot[emitters] != 0).any(axis=1).all())
-        reason = _stop_reason(state, settings, residual, time.perf_counter() - start, direct)
-        if not reason and stop is not None and stop():
-            reason = "interrupted"
-        if reason:
-            break
-        if choose is not None:
-            patch, top, amount = choose(problem, state)
-        else:
-            patch, top, amount = _numpy_choice(problem, state, settings, method, factors)
-        if top <= 0:
-            reason = "converged"
-            break
-        totals = _shoot(problem, state, engine, patch, amount, loops, lazy)
-        state.rays = rays_before + engine.rays_cast
-        state.seconds = time.perf_counter() - start
-        _guard_growth(state, totals[0], settings)
-        _check_divergence(state, totals[0], emitted_total)
-        if progress is not None:
-            progress(state, residual)
-    state.settled()
-    state.settle = None
+    try:
+        while not reason:
+            if totals[2] and (totals[1] - totals[2]) / emitted_total <= settings.tolerance:
+                totals = _settle(problem, state, loops)  # the stop as with every spread exact
+            residual = (totals[1] + totals[2]) / emitted_total  # the residual, or above it
+            direct = direct or bool((state.shot[emitters] != 0).any(axis=1).all())
+            reason = _stop_reason(state, settings, residual, time.perf_counter() - start, direct)
+            if not reason and stop is not None and stop():
+                reason = "interrupted"
+            if reason:
+                break
+            if choose is not None:
+                patch, top, amount = choose(problem, state)
+            else:
+                patch, top, amount = _numpy_choice(problem, state, settings, method, factors)
+            if top <= 0:
+                reason = "converged"
+                break
+            totals = _shoot(problem, state, engine, patch, amount, loops, lazy)
+            state.rays = rays_before + engine.rays_cast
+            state.seconds = time.perf_counter() - start
+            _guard_growth(state, totals[0], settings)
+            _check_divergence(state, totals[0], emitted_total)
+            if progress is not None:
+                progress(state, residual)
+        state.settled()
+    finally:  # a solve's state leaves it settled, or without its settle hook
+        state.settle = None
     state.seconds = time.perf_counter() - start
     state.rays = rays_before + engine.rays_cast
     residual = (
