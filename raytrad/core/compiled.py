@@ -33,6 +33,8 @@ from pathlib import Path
 from types import SimpleNamespace
 from typing import Any
 
+from raytrad.core.cores import OtherLoad
+
 log = logging.getLogger(__name__)
 
 _LOCK = threading.Lock()
@@ -171,28 +173,66 @@ def _renamed(function: Any, name: str) -> Any:
 #: The solver's loops compiled twice (:func:`solver_loops`): the shot, the choice of the
 #: next shooter, and the spreads summed again before the solve stops or is read.
 SOLVER_LOOPS = ("shoot", "ambient_choice", "refresh_stale")
+#: Other processes' load [cores] on this process's CPUs above which the solver takes its
+#: serial loops (:class:`SolverLoops`).
+BUSY_CORES = 0.5
 
 
-def solver_loops(fast: SimpleNamespace, wanted: int) -> SimpleNamespace:
+class SolverLoops:
+    """The solver's loops (:data:`SOLVER_LOOPS`, as attributes): their ``parallel=True``
+    copies while the cores are free, else the loops themselves.
+
+    Each parallel loop waits for all of numba's threads, and a core kept busy by another
+    process makes the thread meant for it wait for the scheduler: with a busy loop on
+    the other core the default solve took 4.1 s, against 0.64 s on one thread
+    (2026-12-05). So :meth:`tick`, called once a shot, reads other processes' load on
+    this process's CPUs (:class:`raytrad.core.cores.OtherLoad`, every 0.1 s, one for the
+    process, so that a refinement's next solve starts knowing it) and takes the serial
+    loops while it is above :data:`BUSY_CORES`. Both give the same results
+    to the bit, so a switch in the middle of a solve changes its time alone.
+    """
+
+    def __init__(self, serial: SimpleNamespace, parallel: SimpleNamespace | None = None) -> None:
+        self._serial, self._parallel = serial, parallel
+        self._load = _once("other load", OtherLoad) if parallel is not None else None
+        self._use(parallel or serial)
+
+    def _use(self, loops: SimpleNamespace) -> None:
+        for name in SOLVER_LOOPS:
+            setattr(self, name, getattr(loops, name))
+        self.parallel = loops is self._parallel
+
+    def tick(self) -> None:
+        """Before a shot: the parallel loops while other processes' load is at most
+        :data:`BUSY_CORES` (or unknown), else the serial ones."""
+        if self._load is None:
+            return
+        load = self._load.cores()
+        free = load is None or load <= BUSY_CORES
+        if free != self.parallel:
+            log.debug("solver loops: %s", "parallel" if free else f"serial, other load {load:.2f}")
+            self._use(self._parallel if free else self._serial)  # type: ignore[arg-type]
+
+
+def solver_loops(fast: SimpleNamespace, wanted: int) -> SolverLoops:
     """The solver's loops of the compiled kernels ``fast`` (:data:`SOLVER_LOOPS`) to call
-    from this thread: their ``parallel=True`` copies when :func:`solver_threads` of
-    ``wanted`` threads is above 1, numba's threads set to that in this thread, else the
-    loops themselves. Both give the same results to the bit (their blocks and rows are
-    summed apart and added in order)."""
+    from this thread, for one solve: their ``parallel=True`` copies where
+    :func:`solver_threads` of ``wanted`` threads is above 1 (numba's threads set to that
+    in this thread) and no other process keeps the cores busy (:class:`SolverLoops`),
+    else the loops
+    themselves. Both give the same results to the bit (their blocks and rows are summed
+    apart and added in order)."""
     threads = solver_threads(wanted)
-    parallel = threads > 1 and hasattr(fast, "shoot_parallel")
-    if parallel and getattr(_THREAD, "threads", 0) != threads:
+    serial = SimpleNamespace(**{name: getattr(fast, name) for name in SOLVER_LOOPS})
+    if threads <= 1 or not hasattr(fast, "shoot_parallel"):
+        return SolverLoops(serial)
+    if getattr(_THREAD, "threads", 0) != threads:
         import numba
 
         numba.set_num_threads(threads)  # numba's setting is per calling thread
         _THREAD.threads = threads
-    key = (id(fast), parallel)
-    loops = _STATE.get("solver_loops")
-    if loops is None or loops[0] != key:
-        suffix = "_parallel" if parallel else ""
-        chosen = SimpleNamespace(**{name: getattr(fast, name + suffix) for name in SOLVER_LOOPS})
-        loops = _STATE["solver_loops"] = (key, chosen)
-    return loops[1]
+    parallel = {name: getattr(fast, name + "_parallel") for name in SOLVER_LOOPS}
+    return SolverLoops(serial, SimpleNamespace(**parallel))
 
 
 def solver_threads(wanted: int) -> int:

@@ -379,6 +379,8 @@ def solve(
                 reason = "interrupted"
             if reason:
                 break
+            if loops is not None:
+                loops.tick()  # the parallel loops, or the serial ones while a core is busy
             if choose is not None:
                 patch, top, amount = choose(problem, state)
             else:

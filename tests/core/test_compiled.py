@@ -359,3 +359,23 @@ def test_the_solver_loops_run_one_after_another_without_a_cheap_threading_layer(
     assert compiled.solver_threads(1) == 1
     fast = compiled.get()
     assert compiled.solver_loops(fast, 1).shoot is fast.shoot
+
+
+def test_the_solver_loops_go_serial_while_other_processes_keep_the_cores_busy(
+    monkeypatch,
+) -> None:
+    """Before each shot the solver reads other processes' load on its CPUs: above
+    ``BUSY_CORES`` it takes the serial loops, at or below it (or unknown) the parallel
+    ones again."""
+    fast = compiled.get()
+    if compiled.solver_threads(2) < 2:
+        pytest.skip("one thread here: the serial loops always")
+    loops = compiled.solver_loops(fast, 2)
+    assert loops.parallel and loops.shoot is fast.shoot_parallel
+    for load, parallel in ((1.0, False), (compiled.BUSY_CORES, True), (0.9, False), (None, True)):
+        monkeypatch.setattr(loops._load, "cores", lambda load=load: load)
+        loops.tick()
+        assert loops.parallel == parallel
+        suffix = "_parallel" if parallel else ""
+        for name in compiled.SOLVER_LOOPS:
+            assert getattr(loops, name) is getattr(fast, name + suffix)

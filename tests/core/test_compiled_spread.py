@@ -94,22 +94,7 @@ def test_a_drifted_spread_stays_within_its_drift_of_the_spread_summed_again(
         assert totals[2] == pytest.approx(float((problem.patch_area @ drift).sum()), rel=1e-12)
     assert drifted > cornell.mesh.patch_count // 4  # the shots did leave spreads to drift
     whole = problem.spread(state.radiosity, state.entry_shot, state.unshot)
-    state.settle = lambda: None  # not a solve's: settled by hand below
-    totals = loops.refresh_stale(
-        problem.touched,
-        problem.patch_entries,
-        problem.patch_ptr,
-        problem.patch_receiver,
-        problem.patch_weight,
-        state.radiosity,
-        state.entry_shot,
-        state.patch_radiosity,
-        state.shot,
-        state.spread,
-        state.peak,
-        problem.spread_drift,
-        problem.patch_area,
-    )
+    totals = solver._settle(problem, state, loops)
     np.testing.assert_array_equal(state.spread, whole[0])
     np.testing.assert_array_equal(state.peak, whole[1])
     assert not problem.spread_drift.any() and not problem.touched.any() and totals[2] == 0.0

@@ -8,7 +8,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from raytrad.core import compiled, shot, solver, system
+from raytrad.core import compiled, cores, shot, solver, system
 from raytrad.core.pipeline import Prepared
 from raytrad.core.solver import SHOOTING_METHODS, SolveResult, SolveSettings, solve
 
@@ -52,7 +52,11 @@ def test_the_parallel_shot_solves_as_the_serial_one_to_the_bit(
         loops = SimpleNamespace(
             **{name: getattr(fast, name + suffix) for name in compiled.SOLVER_LOOPS}
         )
-        monkeypatch.setattr(compiled, "solver_loops", lambda kernels, wanted, chosen=loops: chosen)
+        monkeypatch.setattr(
+            compiled,
+            "solver_loops",
+            lambda kernels, wanted, chosen=loops: compiled.SolverLoops(chosen),
+        )
         results.append(_solve(cornell, tolerance=1e-4))
     serial, parallel = results
     assert serial.state.shots == parallel.state.shots > 100
@@ -141,3 +145,36 @@ def test_the_spread_a_shot_leaves_is_the_whole_spread_to_the_bit(
     np.testing.assert_array_equal(state.peak, whole[1])
     assert totals == shot.unshot_totals(problem, state, fast)
     assert state.shots == 200 and not problem.touched.any()
+
+
+@pytest.mark.skipif(compiled.get() is None, reason="numba is not installed")
+def test_a_solve_that_switches_between_serial_and_parallel_loops_is_the_same_to_the_bit(
+    cornell: Prepared, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Another process's load on the cores makes the solve switch to its serial loops
+    until it is gone (:class:`compiled.SolverLoops`); switching back and forth in the
+    middle of a solve gives the solve of the serial loops alone."""
+    fast = compiled.get()
+    serial = SimpleNamespace(**{name: getattr(fast, name) for name in compiled.SOLVER_LOOPS})
+    monkeypatch.setattr(
+        compiled, "solver_loops", lambda kernels, wanted: compiled.SolverLoops(serial)
+    )
+    alone = _solve(cornell, tolerance=1e-4)
+    monkeypatch.undo()
+    modes = []
+    loads = iter(np.tile([0.0, 1.0, 1.0, 0.0, 0.0, 0.0, 2.0], 1000))  # free, busy, ...
+    monkeypatch.setattr(cores.OtherLoad, "cores", lambda self: next(loads))
+    tick = compiled.SolverLoops.tick
+
+    def counted(self: compiled.SolverLoops) -> None:
+        tick(self)
+        modes.append(self.parallel)
+
+    monkeypatch.setattr(compiled.SolverLoops, "tick", counted)
+    switched = _solve(cornell, tolerance=1e-4)
+    if compiled.solver_threads(2) > 1:
+        assert True in modes and False in modes
+    assert switched.state.shots == alone.state.shots > 100
+    np.testing.assert_array_equal(switched.radiosity, alone.radiosity)
+    for name in ("patch_radiosity", "shot", "entry_shot", "spread", "peak"):
+        np.testing.assert_array_equal(getattr(switched.state, name), getattr(alone.state, name))
