@@ -5,9 +5,10 @@ their factors, :mod:`raytrad.core.formfactor`): every receiver of the column gai
 irradiance, its radiosity and the patch averages it belongs to change, and the shooter's
 receivers record what they shot; then the spread of the patches it changed is summed
 again, and the unshot power the solve watches is totalled (:func:`unshot_totals`).
-:func:`shoot` does all three in one compiled loop (:mod:`raytrad.core.compiled`) when
-available, with :func:`numpy_shoot` (the reference it is tested against) otherwise. The
-solve that chooses the shooters is :mod:`raytrad.core.solver`'s.
+:func:`shoot` does all three in one compiled call (:mod:`raytrad.core.compiled`) when
+available, else :func:`numpy_step` (:func:`numpy_shoot` and the rest in numpy, the
+reference it is tested against). The solve that chooses the shooters is
+:mod:`raytrad.core.solver`'s.
 """
 
 from __future__ import annotations
