@@ -15,6 +15,7 @@ points move into their own triangles (:func:`raytrad.core.pairs.receiver_points`
 from __future__ import annotations
 
 import os
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -373,7 +374,9 @@ def test_the_solver_loops_go_serial_while_other_processes_keep_the_cores_busy(
     loops = compiled.solver_loops(fast, 2)
     assert loops.parallel and loops.shoot is fast.shoot_parallel
     for load, parallel in ((1.0, False), (compiled.BUSY_CORES, True), (0.9, False), (None, True)):
-        monkeypatch.setattr(loops._load, "cores", lambda load=load: load)
+        # a load of this solve's own (patching the shared one would leave a bound
+        # method on it when undone, shadowing later patches of the class)
+        monkeypatch.setattr(loops, "_load", SimpleNamespace(cores=lambda load=load: load))
         loops.tick()
         assert loops.parallel == parallel
         suffix = "_parallel" if parallel else ""

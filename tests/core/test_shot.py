@@ -8,7 +8,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from raytrad.core import compiled, cores, shot, solver, system
+from raytrad.core import compiled, shot, solver, system
 from raytrad.core.pipeline import Prepared
 from raytrad.core.solver import SHOOTING_METHODS, SolveResult, SolveSettings, solve
 
@@ -163,7 +163,7 @@ def test_a_solve_that_switches_between_serial_and_parallel_loops_is_the_same_to_
     monkeypatch.undo()
     modes = []
     loads = iter(np.tile([0.0, 1.0, 1.0, 0.0, 0.0, 0.0, 2.0], 1000))  # free, busy, ...
-    monkeypatch.setattr(cores.OtherLoad, "cores", lambda self: next(loads))
+    monkeypatch.setitem(compiled._STATE, "other load", SimpleNamespace(cores=lambda: next(loads)))
     tick = compiled.SolverLoops.tick
 
     def counted(self: compiled.SolverLoops) -> None:
