@@ -235,6 +235,32 @@ def solver_loops(fast: SimpleNamespace, wanted: int) -> SolverLoops:
     return SolverLoops(serial, SimpleNamespace(**parallel))
 
 
+#: Kernels the solve calls from Python besides its loops, loaded ahead with them
+#: (:func:`load_solver`).
+SOLVE_HELPERS = ("patch_average", "patch_spread_rows", "unshot_totals")
+
+
+def load_solver(wanted: int) -> None:
+    """Load the loops a solve with ``wanted`` threads starts with (:func:`solver_loops`:
+    the parallel copies, or the loops themselves on one thread) and
+    :data:`SOLVE_HELPERS` from numba's cache now, compiling any it lacks. numba does
+    this at a kernel's first call otherwise: about 30 ms for these (2026-12-06), which
+    the first solve in a process paid. The pipeline calls it in its kernels stage.
+    Nothing where numba is not used."""
+    fast = get()
+    if fast is None:
+        return
+    import numba
+
+    from raytrad.core._kernel_signatures import SIGNATURES
+
+    parallel = solver_threads(wanted) > 1 and hasattr(fast, "shoot_parallel")
+    names = [name + ("_parallel" if parallel else "") for name in SOLVER_LOOPS]
+    for name in (*names, *SOLVE_HELPERS):
+        if hasattr(fast, name) and name in SIGNATURES:
+            _compile(numba, getattr(fast, name), SIGNATURES[name])
+
+
 def solver_threads(wanted: int) -> int:
     """Threads the solver's parallel loops run on in this process: ``wanted`` (the
     form-factor pass's, :func:`raytrad.core.visibility.worker_count`), at most numba's. 1

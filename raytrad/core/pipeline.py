@@ -40,7 +40,7 @@ from raytrad.core.mesh import MeshSettings, RadiosityMesh, build_mesh
 from raytrad.core.pairs import receiver_points
 from raytrad.core.repair import repair_scene
 from raytrad.core.solver import SolveResult, SolveSettings, check_solvable, filled_capture
-from raytrad.core.visibility import Occluder, nothing_can_occlude
+from raytrad.core.visibility import Occluder, nothing_can_occlude, worker_count
 from raytrad.errors import SolverError
 from raytrad.scene import Scene, has_emission, triangle_areas_normals
 
@@ -177,6 +177,7 @@ def prepare(
     check_solvable(mesh)  # a scene that cannot be solved fails before any compiling
     with timed(timings, "kernels"):  # compiled the first time: not the pass's time
         compiled.get()
+        compiled.load_solver(worker_count())  # numba loads them here, not in the solve
     closed = None
     with timed(timings, "form_factors"):
         if occluder is not None:

@@ -382,3 +382,42 @@ def test_the_solver_loops_go_serial_while_other_processes_keep_the_cores_busy(
         suffix = "_parallel" if parallel else ""
         for name in compiled.SOLVER_LOOPS:
             assert getattr(loops, name) is getattr(fast, name + suffix)
+
+
+#: Run in a fresh process: prepare a small Cornell box, then print the kernels the solve
+#: still had to load or compile (a new overload on its dispatcher).
+_SOLVE_LOADS = """
+import json, sys
+from raytrad import api
+from raytrad.core import compiled, pipeline, solver
+from raytrad.core.mesh import MeshSettings
+prepared = pipeline.prepare(api.load(sys.argv[1]).scene, MeshSettings(receivers=500))
+fast = compiled.get()
+before = {name: len(getattr(fast, name).overloads) for name in vars(fast)}
+solver.solve(prepared.mesh, prepared.engine)
+print(json.dumps([name for name in before if len(getattr(fast, name).overloads) != before[name]]))
+"""
+
+
+def test_the_solve_loads_no_kernel_the_pipeline_did_not(tmp_path) -> None:
+    """The pipeline's kernels stage loads the solver's loops and helpers
+    (:func:`compiled.load_solver`): the first solve in a process, on one thread or
+    several, does not pay numba's loading of them (about 30 ms at the default size)."""
+    import json
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    scene = str(Path(__file__).resolve().parents[2] / "scenes" / "cornell-box.obj")
+    for threads in ("1", "2"):
+        env = {**os.environ, "RAYTRAD_THREADS": threads}
+        done = subprocess.run(
+            [sys.executable, "-c", _SOLVE_LOADS, scene],
+            capture_output=True,
+            text=True,
+            cwd=tmp_path,
+            env=env,
+            check=True,
+        )
+        assert json.loads(done.stdout.strip().splitlines()[-1]) == [], threads
