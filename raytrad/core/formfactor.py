@@ -238,19 +238,21 @@ class FormFactorEngine:
             out.append((patch, factors, gather))
         return out
 
-    def raw_column(self, patch: int) -> Column:
-        """F(receiver <- patch) before balancing (float32; see :meth:`column_scales`)."""
-        known = self._known(patch)
+    def raw_column(self, patch: int, mapped: bool = False) -> Column:
+        """F(receiver <- patch) before balancing (float32; see :meth:`column_scales`).
+        ``mapped``: a spilled column's arrays map its file, for a caller that holds one
+        column at a time (:meth:`ColumnSpill.read`)."""
+        known = self._known(patch, mapped)
         if known is not None:
             return known
         return self._store(patch, self._compute(patch))
 
-    def _known(self, patch: int) -> Column | None:
+    def _known(self, patch: int, mapped: bool = False) -> Column | None:
         """The column of ``patch`` from the cache or the spill files, or None."""
         cached = self._cache.get(patch)
         if cached is not None:
             return cached
-        return self._spill.read(patch)
+        return self._spill.read(patch, mapped)
 
     def _known_factors(self, patch: int) -> tuple[np.ndarray, np.ndarray]:
         """(receivers, raw factors) of a computed column, without its gather weights."""

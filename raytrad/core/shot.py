@@ -75,7 +75,7 @@ def shoot(
         if fast is None:
             return numpy_step(problem, state, engine, patch, amount)
         loops = compiled.solver_loops(fast, worker_count())
-    column = engine.raw_column(patch)
+    column = engine.raw_column(patch, mapped=True)  # held for this shot alone
     scales = engine.column_scales(patch)
     row_scale, column_scale = scales
     gather = column.gather
