@@ -176,8 +176,8 @@ def write_arrays(path: str, arrays: tuple[np.ndarray, ...]) -> None:
     with open(path, "wb") as file:
         file.write(np.array(header, dtype=np.int64).tobytes())
         for array in arrays:
-            data = np.ascontiguousarray(array).tobytes()
-            file.write(data + bytes(-len(data) % 8))
+            file.write(np.ascontiguousarray(array).data)  # its buffer, not a copy
+            file.write(bytes(-array.nbytes % 8))
 
 
 def read_arrays(path: str, count: int | None = None, mapped: bool = False) -> list[np.ndarray]:

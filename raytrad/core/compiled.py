@@ -89,6 +89,7 @@ def _dispatchers(numba: Any) -> dict[str, Any]:
     its module, helpers first, so that the kernels call each other compiled), by name.
     numba compiles each on its first call, or loads it from its cache."""
     from raytrad.core import (
+        _compiled_convergence,
         _compiled_gather,
         _compiled_kernels,
         _compiled_near,
@@ -108,6 +109,7 @@ def _dispatchers(numba: Any) -> dict[str, Any]:
         _compiled_solver,
         _compiled_segments,
         _compiled_rays,
+        _compiled_convergence,
     )
     link_embree(numba)
     kernels = {}

@@ -239,9 +239,8 @@ class FormFactorEngine:
         return out
 
     def raw_column(self, patch: int, mapped: bool = False) -> Column:
-        """F(receiver <- patch) before balancing (float32; see :meth:`column_scales`).
-        ``mapped``: a spilled column's arrays map its file, for a caller that holds one
-        column at a time (:meth:`ColumnSpill.read`)."""
+        """F(receiver <- patch) before balancing (float32; see :meth:`column_scales`);
+        ``mapped``: a spilled one maps its file (:meth:`ColumnSpill.read`)."""
         known = self._known(patch, mapped)
         if known is not None:
             return known

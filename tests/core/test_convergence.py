@@ -14,13 +14,17 @@ from dataclasses import dataclass
 import numpy as np
 import pytest
 
+from raytrad.core import compiled
 from raytrad.core.convergence import (
     ConvergenceMonitor,
     ErrorLog,
     Reference,
     ResidualTrend,
     error_bound,
+    error_estimate,
     eta_seconds,
+    radiosity_sums,
+    receiver_norms,
     true_error,
 )
 from raytrad.core.formfactor import FormFactorEngine
@@ -149,7 +153,8 @@ def test_bound_is_never_below_the_true_error(runs: Runs, case: str, method: str)
 
 def test_bound_is_zero_with_nothing_unshot_and_infinite_without_contraction() -> None:
     unshot = np.zeros((2, 3))
-    args = (np.ones(2), np.ones(4), np.ones((4, 3)), np.full(3, 0.5))
+    args = (np.ones(2), receiver_norms(np.ones(4), np.ones((4, 3)), np.ones((4, 3))))
+    args += (np.full(3, 0.5),)
     rms, maximum = error_bound(unshot, *args, 1.0, 1.0)
     np.testing.assert_array_equal(rms, 0.0)
     np.testing.assert_array_equal(maximum, 0.0)
@@ -166,8 +171,7 @@ def test_bound_closed_form_on_one_patch() -> None:
     rms, maximum = error_bound(
         np.full((1, 3), 0.1),
         np.ones(1),
-        np.full(2, 0.5),
-        np.ones((2, 3)),
+        receiver_norms(np.full(2, 0.5), np.ones((2, 3)), np.full((2, 3), 0.5)),
         np.full(3, 0.5),
         1.0,
         1.0,
@@ -179,6 +183,36 @@ def test_bound_closed_form_on_one_patch() -> None:
 # --------------------------------------------------------------------------------------
 # The estimate
 # --------------------------------------------------------------------------------------
+
+
+def test_the_estimate_and_the_bound_from_norms_are_the_sums_over_receivers() -> None:
+    """The monitor sums the receivers once a row (:func:`receiver_norms`); the estimate
+    and the bound from those sums are the per-receiver sums written out: Feda's
+    ``sqrt(sum a (rho Ambient)^2) / sqrt(sum a B^2)`` and ``sqrt(sum a B^2 / sum a)``,
+    ``max |B|``, with every capture known."""
+    rng = np.random.default_rng(5)
+    patches, receivers = 7, 40
+    unshot = rng.normal(size=(patches, 3))
+    patch_area, captured = rng.uniform(0.5, 2, patches), rng.uniform(0.2, 0.9, patches)
+    patch_reflectance = rng.uniform(0.1, 0.8, (patches, 3))
+    area, reflectance = rng.uniform(0.1, 1, receivers), rng.uniform(0, 0.9, (receivers, 3))
+    radiosity = rng.normal(size=(receivers, 3))
+    norms = receiver_norms(area, radiosity, reflectance)
+    estimate = error_estimate(unshot, patch_area, patch_reflectance, captured, norms)
+    caught = patch_area * captured
+    lost = patch_area @ (1 - patch_reflectance * captured[:, None])
+    ambient = np.sqrt(np.abs(caught @ unshot) * (caught @ np.abs(unshot))) / lost
+    expected = np.sqrt(area @ (reflectance * ambient) ** 2) / np.sqrt(area @ radiosity**2)
+    np.testing.assert_allclose(estimate, expected, rtol=1e-12)
+    assert norms.area == pytest.approx(area.sum(), rel=1e-15)
+    np.testing.assert_array_equal(norms.peak, np.abs(radiosity).max(axis=0))
+    # the bound's relative RMS: e_rms / (b_rms - e_rms), with b_rms from the sums
+    rms, _ = error_bound(unshot * 1e-3, patch_area, norms, np.full(3, 0.5), 1.0, 1.0)
+    e_max = 0.5 * np.abs(unshot * 1e-3).max(axis=0) / 0.5
+    e_mean = 0.5 * (patch_area @ np.abs(unshot * 1e-3)) / 0.5 / area.sum()
+    b_rms = np.sqrt(area @ radiosity**2 / area.sum())
+    e_rms = np.sqrt(e_max * e_mean)
+    np.testing.assert_allclose(rms, e_rms / (b_rms - e_rms), rtol=1e-12)
 
 
 def _estimate_ratios(log: ErrorLog) -> tuple[np.ndarray, np.ndarray]:
@@ -342,3 +376,23 @@ def test_true_error_in_a_black_channel_is_absolute() -> None:
     rms, maximum = true_error(radiosity, reference, area)
     np.testing.assert_allclose(rms, [0.0, 0.0, 0.5])
     np.testing.assert_allclose(maximum, [0.0, 0.0, 0.5])
+
+
+@pytest.mark.skipif(compiled.get() is None, reason="numba is not installed")
+def test_the_compiled_radiosity_sums_agree_with_numpy() -> None:
+    """The monitor's row sums (``_compiled_convergence.radiosity_sums``) against the numpy
+    reference: a subset of receivers, negative radiosity, emission, and a NaN."""
+    rng = np.random.default_rng(11)
+    irradiance = rng.normal(size=(500, 3))
+    counted = np.sort(rng.choice(500, 300, replace=False)).astype(np.int64)
+    emission = np.where(rng.random((300, 3)) < 0.1, rng.uniform(0, 5, (300, 3)), 0.0)
+    reflectance, area = rng.uniform(0, 0.95, (300, 3)), rng.uniform(0.01, 1, 300)
+    args = (counted, irradiance, emission, reflectance, area)
+    square, peak = compiled.get().radiosity_sums(*args)
+    expected = radiosity_sums(*args)
+    np.testing.assert_allclose(square, expected[0], rtol=1e-12)
+    np.testing.assert_array_equal(peak, expected[1])
+    irradiance[counted[7], 1] = np.nan
+    square, peak = compiled.get().radiosity_sums(*args)
+    assert np.isnan(square[1]) and np.isnan(peak[1]) and np.isfinite(peak[[0, 2]]).all()
+    assert np.array_equal(np.isnan(radiosity_sums(*args)[1]), np.isnan(peak))
