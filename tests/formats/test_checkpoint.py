@@ -15,6 +15,7 @@ from raytrad.formats.checkpoint import (
     RECORD,
     Spool,
     StoredArray,
+    drop_cached,
     read_checkpoint,
     write_checkpoint,
 )
@@ -145,3 +146,50 @@ def test_a_checkpoint_cut_short_is_refused(tmp_path: Path) -> None:
     path.write_bytes(path.read_bytes()[:-4000])
     with pytest.raises(RaytradError, match="cannot read checkpoint"):
         read_checkpoint(path, lazy={"s", "f"})
+
+
+def _resident_pages(path: Path) -> int:
+    """Pages of ``path`` in the system's file cache (Linux's ``mincore`` on a mapping that
+    touches none of them)."""
+    import ctypes
+    import mmap
+
+    size = path.stat().st_size
+    pages = -(-size // mmap.PAGESIZE)
+    with open(path, "rb") as file, mmap.mmap(file.fileno(), size, access=mmap.ACCESS_COPY) as m:
+        view = ctypes.c_char.from_buffer(m)
+        vector = (ctypes.c_ubyte * pages)()
+        libc = ctypes.CDLL(None, use_errno=True)
+        libc.mincore.argtypes = (ctypes.c_void_p, ctypes.c_size_t, ctypes.c_void_p)
+        if libc.mincore(ctypes.addressof(view), size, vector) != 0:
+            pytest.skip("mincore failed here")
+        del view
+    return sum(v & 1 for v in vector)
+
+
+@pytest.mark.skipif(not hasattr(__import__("os"), "posix_fadvise"), reason="no posix_fadvise")
+def test_a_written_checkpoint_leaves_the_file_cache(tmp_path: Path) -> None:
+    """A checkpoint of gigabytes kept in the file cache pushed the spilled columns out of
+    it; once fsynced it is dropped (``drop_cached``). A file written alike and not
+    dropped stays cached, so the count is not vacuous."""
+    import os
+
+    values = np.arange(1 << 20, dtype=np.float64)  # 8 MiB
+    kept = tmp_path / "kept.bin"
+    with open(kept, "wb") as file:
+        file.write(values.tobytes())
+        file.flush()
+        os.fsync(file.fileno())
+    if _resident_pages(kept) == 0:
+        pytest.skip("this file system keeps no written page in the cache")
+    path = tmp_path / "c.npz"
+    write_checkpoint(path, {"values": values}, {})
+    probe = tmp_path / "probe.bin"
+    probe.write_bytes(values.tobytes())
+    with open(probe, "rb+") as file:
+        os.fsync(file.fileno())
+        drop_cached(file.fileno())
+    if _resident_pages(probe) > 0:
+        pytest.skip("this file system keeps its pages whatever the advice (tmpfs)")
+    assert _resident_pages(path) == 0 and _resident_pages(kept) > 0
+    np.testing.assert_array_equal(read_checkpoint(path)[0]["values"], values)
