@@ -770,8 +770,8 @@ class ScaledEngine:
         column = self.engine.column(patch)
         return Column(column.receivers, column.factors * self.factor, column.rays)
 
-    def raw_column(self, patch: int) -> Column:
-        column = self.engine.raw_column(patch)
+    def raw_column(self, patch: int, mapped: bool = False) -> Column:
+        column = self.engine.raw_column(patch, mapped)
         return Column(column.receivers, column.factors, column.rays)
 
     def column_scales(self, patch: int) -> tuple[np.ndarray, float]:
