@@ -63,6 +63,26 @@ def test_render_furnace(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> N
     ]
 
 
+def test_the_report_says_which_columns_were_spilled(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Columns beyond ``--cache-mb`` go to spill files (the issue: "state which"), and the
+    report counts them; the render is the same to the byte as one whose cache held every
+    column."""
+    scene = str(SCENES / "cornell-box.obj")
+    reports, plys = [], []
+    for name, cache in (("cached", []), ("spilled", ["--cache-mb", "0.05"])):
+        out = tmp_path / name
+        status, _, err = run_cli(["render", scene, "-o", str(out), *SMALL, *cache], capsys)
+        assert status == 0, err
+        reports.append(json.loads((out / "report.json").read_text())["solve"])
+        plys.append((out / "cornell-box.ply").read_bytes())
+    patches = reports[1]["form_factor_columns"]
+    assert reports[0]["columns_spilled"] == 0
+    assert 0 < reports[1]["columns_spilled"] <= patches
+    assert plys[0] == plys[1]
+
+
 def test_no_imprint_is_a_mesh_setting(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     out = tmp_path / "out"
     argv = ["render", str(FURNACE_OBJ), "-o", str(out), *SMALL, "--no-imprint"]

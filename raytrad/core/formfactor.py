@@ -9,9 +9,9 @@ area dA_k with fixed sample points y_k (normal n_k) is::
 against its distance; it underestimates near, oblique receivers. So a sub-area closer than
 :data:`NEAR_FACTOR` times its size is evaluated exactly instead: each of its triangles gets
 the closed-form Lambert point-to-polygon factor, clipped to the receiver's horizon, times
-the visibility of the triangle's centroid. Near and far receivers therefore both get the
-unoccluded factor to within a fraction of a percent, at a cost that stays bounded. Pairs
-that cannot exchange light (receiver behind the patch, patch below its horizon) cost no ray.
+the visibility of the triangle's centroid: near and far receivers both get the unoccluded
+factor to within a fraction of a percent, at a bounded cost. Pairs that cannot exchange
+light (receiver behind the patch, patch below its horizon) cost no ray.
 """
 
 from __future__ import annotations
@@ -105,10 +105,9 @@ class FormFactorEngine:
     occluder : Occluder or None
         None when nothing in the scene can block light (a convex enclosure): no rays.
     cache_bytes : int
-        Memory for cached columns (receivers and factors); a column is computed once and
-        reused while it fits, and one that does not fit is spilled to a temporary file
-        and read back when shot again (0: no cache, recomputed each time). The
-        near-field gather weights are kept in memory beside the cache.
+        Memory for cached columns, their near-field gather weights included; one that
+        does not fit is spilled to a temporary file (:attr:`columns_spilled`) and read
+        back when shot again (0: no cache, recomputed each time).
     cull : bool
         Trace only the (receiver, patch) pairs whose shaft an occluder may cross
         (:mod:`raytrad.core.shafts`); False traces every pair (the tests' reference).
@@ -164,8 +163,7 @@ class FormFactorEngine:
 
     @property
     def _sides(self) -> np.ndarray | None:
-        """Packed facet side bits of the receivers' ray origins (computed once, on first
-        use; None when the pass is not culled)."""
+        """Packed facet side bits of the receivers' ray origins (once; None unculled)."""
         if self._pairs.facets is None:
             return None
         with self._sides_lock:
@@ -175,8 +173,8 @@ class FormFactorEngine:
 
     @property
     def rays_naive(self) -> int:
-        """Rays an unclassified vertex-to-patch caster would have cast for the same work:
-        (receiver, patch) pairs that see each other x the patch's sample points."""
+        """Rays a vertex-to-patch caster without culling would cast: (receiver, patch)
+        pairs that see each other x the patch's sample points."""
         return self._pairs.naive_rays
 
     def close(self) -> None:
@@ -187,15 +185,19 @@ class FormFactorEngine:
 
     def release_columns(self) -> None:
         """Drop the cached and spilled columns once the solve is done with them (a render
-        then refines and writes without holding ``--cache-mb`` of them): a later
-        :meth:`column` computes a column again. Only a complete pass's columns go; a pass
-        cut short keeps them for its checkpoint."""
+        then refines and writes without ``--cache-mb`` of them; a later :meth:`column`
+        computes one again). A pass cut short keeps them for its checkpoint."""
         if not self.complete:
             return
         self._cache.clear()
         self._cached_bytes = 0
         self._spill.close()
         return_freed_memory()
+
+    @property
+    def columns_spilled(self) -> int:
+        """Columns written to spill files beyond the cache (still counted once freed)."""
+        return self._spill.spilled_columns
 
     @property
     def held_bytes(self) -> int:
@@ -249,9 +251,7 @@ class FormFactorEngine:
     def _known(self, patch: int, mapped: bool = False) -> Column | None:
         """The column of ``patch`` from the cache or the spill files, or None."""
         cached = self._cache.get(patch)
-        if cached is not None:
-            return cached
-        return self._spill.read(patch, mapped)
+        return cached if cached is not None else self._spill.read(patch, mapped)
 
     def _known_factors(self, patch: int) -> tuple[np.ndarray, np.ndarray]:
         """(receivers, raw factors) of a computed column, without its gather weights."""
@@ -282,9 +282,8 @@ class FormFactorEngine:
         return col
 
     def pass_columns(self) -> dict[str, np.ndarray]:
-        """The columns of a form-factor pass cut short, packed as flat arrays for a
-        checkpoint (:meth:`restore_columns` reads them back); empty once every column is
-        computed. Cached and spilled columns are kept."""
+        """A cut pass's columns, packed flat for a checkpoint (:meth:`restore_columns` reads
+        them back); empty once every column is computed. The columns are kept."""
         return {} if self.complete else pack_columns(list(self.pass_column_parts()))
 
     def pass_column_parts(self, every: bool = False) -> Iterator[dict[str, np.ndarray]]:

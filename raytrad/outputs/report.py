@@ -74,6 +74,7 @@ def build_report(
             "rays_naive": prepared.engine.rays_naive,
             "rays_per_second": rays_per_second,
             "form_factor_columns": prepared.engine.columns_computed,
+            "columns_spilled": prepared.engine.columns_spilled,
             "residual": result.residual,
             "seconds": state.seconds,
             "ambient_gain": state.ambient_gain,
