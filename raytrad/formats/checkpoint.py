@@ -39,13 +39,9 @@ class SpooledArray:
     length: int
 
     def blocks(self, items: int = 1 << 22) -> Iterator[np.ndarray]:
-        """The array in pieces of at most ``items`` values; each piece read is dropped
-        from the system's file cache (:func:`drop_cached`: it is read once)."""
+        """The array in pieces of at most ``items`` values."""
         with open(self.path, "rb") as handle:
-            start = 0
             while chunk := handle.read(items * self.dtype.itemsize):
-                drop_cached(handle.fileno(), start, len(chunk))
-                start += len(chunk)
                 yield np.frombuffer(chunk, dtype=self.dtype)
 
 
@@ -87,13 +83,14 @@ def drop_cached(descriptor: int, start: int = 0, length: int = 0) -> None:
     file ``descriptor`` from its file cache (``POSIX_FADV_DONTNEED``; those not written
     to disk yet stay). Nothing where the system has no such call.
 
-    A checkpoint is read back only by a later run's ``--resume``, and the pieces of a
-    :class:`Spool` once. At a million receivers a pass checkpoint is gigabytes, written
-    while the spilled columns (:class:`raytrad.core.columns.ColumnSpill`) sit in the
-    same cache: kept there, checkpoint, spool and spill outgrew a 24 GiB machine's
-    memory, and the solve then read the spilled columns back from the disk (2.0 s of
-    reading and slower shots, against 0.13 s in a process that wrote no checkpoint,
-    2026-12-06)."""
+    A checkpoint is read back only by a later run's ``--resume``. At a million receivers
+    a pass checkpoint is gigabytes, written while the spilled columns
+    (:class:`raytrad.core.columns.ColumnSpill`) sit in the same cache: kept there,
+    checkpoints, their spool and the spill outgrew a 24 GiB machine's memory, and the
+    solve then read the spilled columns back from the disk (2.0 s of reading and slower
+    shots, against 0.13 s in a process that wrote no checkpoint, 2026-12-06). Only
+    pages already on disk are dropped: advising it on a :class:`Spool`'s pieces, dirty
+    and deleted right after, would start their writing instead."""
     advise = getattr(os, "posix_fadvise", None)
     if advise is None:  # pragma: no cover - not on Linux
         return
