@@ -204,20 +204,18 @@ def render(
     scene_path : path-like
         OBJ (+MTL), glTF 2.0 (.gltf/.glb), PLY or TOML scene file.
     output_dir : path-like
-        Created if missing; outputs are replaced atomically. Held by one run at a time
-        (:class:`~raytrad.outputs.run_lock.RunLock`).
+        Created if missing; outputs replaced atomically; one run at a time (``RunLock``).
     settings : RenderSettings
         What it leaves at None the scene file's ``[output]`` gives (else the defaults).
     resume : bool or "auto"
         Continue from ``<output_dir>/<stem>.checkpoint.npz`` if it exists (refused, naming
-        what changed, if made for another scene or other mesh settings; ``"auto"``, as batch
-        jobs do, passes such a checkpoint over with a warning); ``report.json`` says what
-        it took (``"resumed"``).
+        what changed, if made for another scene or other mesh settings; ``"auto"``, as
+        batch jobs do, passes it over with a warning); ``report.json``'s ``"resumed"``.
     progress : callable or None
         ``progress(RenderProgress)`` after each shot.
     stop : callable or None
-        Polled after each column of the pass, before each shot and after each patch of a
-        refinement round; True stops there, writes the outputs so far and a checkpoint.
+        Polled after each column of the pass, each shot and each patch of a refinement
+        round; True stops there, writes the outputs so far and a checkpoint.
     reference : str or None
         Measure the true error against this reference (see :func:`make_reference`).
     plot : bool
@@ -242,6 +240,8 @@ def render(
         key = fingerprint(loaded.scene, settings.system_settings())
         checkpoint = checkpoint_path(output_dir, scene_path.stem)
         point = resume_point(checkpoint, key, resume, settings.solve)
+        if point.state is not None:  # its save planned at the rate the last one took
+            budget.measured(*resuming.last_save(checkpoint))
         taken = resuming.resume_facts(point.state, point.columns, point.scales)  # before solve
         logs: list[ErrorLog] = []  # the solve's error log, saved with its state
 

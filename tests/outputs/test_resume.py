@@ -16,6 +16,7 @@ from raytrad.errors import RaytradError
 from raytrad.outputs.resume import (
     difference,
     fingerprint,
+    last_save,
     load_refinement,
     load_state,
     save_refinement,
@@ -397,3 +398,25 @@ def test_the_rounds_of_a_cut_refinement_round_trip(
     assert "made for another solve" in caplog.text
     path.write_bytes(b"not a checkpoint")
     assert load_refinement(path, key, "solve-a") is None
+
+
+def test_a_resumed_run_plans_its_save_at_the_rate_the_last_one_took(tmp_path: Path) -> None:
+    """``last_save``: the checkpoint's size and the ``timings_seconds.checkpoint`` of the
+    report written after it; nothing from a report older than the checkpoint, a missing
+    or a damaged one."""
+    import json
+    import os
+
+    checkpoint = tmp_path / "scene.checkpoint.npz"
+    checkpoint.write_bytes(b"x" * 1000)
+    report = tmp_path / "report.json"
+    assert last_save(checkpoint) == (0, 0.0)  # no report
+    report.write_text(json.dumps({"timings_seconds": {"checkpoint": 2.5}}))
+    os.utime(checkpoint, (1e9, 1e9))
+    assert last_save(checkpoint) == (1000, 2.5)
+    os.utime(checkpoint, (4e9, 4e9))  # written after the report: another run's report
+    assert last_save(checkpoint) == (0, 0.0)
+    os.utime(checkpoint, (1e9, 1e9))
+    for text in ("{", json.dumps({"timings_seconds": {}}), json.dumps([1])):
+        report.write_text(text)
+        assert last_save(checkpoint) == (0, 0.0)
