@@ -149,7 +149,7 @@ def last_save(checkpoint: Path) -> tuple[int, float]:
     written after it; else (0, 0.0). A resumed run plans its own save at that rate
     (:meth:`raytrad.core.pipeline.RunBudget.measured`): a checkpoint holds every column so
     far, so each run of a time-limited chain writes more, and at 150 000 receivers the
-    runs wrote at 84-110 MB/s against the 184 planned, ending 2-7 s past a 20 s limit
+    runs wrote at 84-110 MB/s against the 150 planned, ending 2-7 s past a 20 s limit
     (a newcomer's chain, 2026-12-06)."""
     report = checkpoint.parent / "report.json"
     try:
