@@ -83,9 +83,8 @@ class ColumnSpill:
         self._failed = False
         #: Bytes written to spill files.
         self.bytes = 0
-        #: Columns spilled since the spill was made, and their bytes (kept by :meth:`close`).
+        #: Columns spilled since the spill was made (kept by :meth:`close`).
         self.spilled_columns = 0
-        self.spilled_bytes = 0
 
     def __contains__(self, patch: int) -> bool:
         return patch in self._paths
@@ -119,7 +118,6 @@ class ColumnSpill:
         self._paths[patch] = path
         self.bytes += column.nbytes
         self.spilled_columns += 1
-        self.spilled_bytes += column.nbytes
         return True
 
     def read(self, patch: int, mapped: bool = False) -> Column | None:
